@@ -1,0 +1,279 @@
+"""`dronectl bench sim`: how fast the simulated world runs on this machine.
+
+Measures, in order:
+- physics real-time factor without a camera: takeoff, then hover and body-velocity
+  moves through the autopilot at the physics rate (240 Hz);
+- the same flight with the forward camera rendering at 30 Hz (224×224, noise on,
+  no segmentation mask, as a flight camera would);
+- render time per frame at 96, 128 and 224 px, with and without the mask (p50, p99);
+- collection throughput at 224 px with the default worker count.
+
+Timings share the CPU with whatever else runs: the load average is reported with
+them so that noisy numbers can be recognised as such.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import resource
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sim_world.camera import CameraConfig
+from sim_world.collect import CollectConfig, collect
+from sim_world.render_workers import RenderWorkers
+from sim_world.world import World, WorldConfig
+
+TARGETS = {"physics_rtf": 20.0, "camera_rtf": 3.0, "collect_images_per_s": 50.0}
+"""The targets of the project's issue for this 2-core machine."""
+
+# (seconds, forward, right, down) body-velocity legs after takeoff; None = hold.
+_FLIGHT: tuple[tuple[float, tuple[float, float, float] | None], ...] = (
+    (2.0, None),
+    (2.0, (0.0, 0.5, 0.0)),
+    (2.0, (0.0, -0.5, 0.0)),
+    (2.0, (0.0, 0.0, -0.3)),
+    (2.0, (0.0, 0.0, 0.3)),
+    (2.0, (0.3, 0.0, 0.0)),
+    (2.0, (-0.3, 0.0, 0.0)),
+    (2.0, None),
+)
+
+
+@dataclass(frozen=True)
+class SimBenchSettings:
+    seed: int = 0
+    camera_hz: float = 30.0
+    camera_size_px: int = 224
+    render_sizes_px: tuple[int, ...] = (96, 128, 224)
+    render_frames: int = 60
+    collect_images: int = 400
+    collect_workers: int = os.cpu_count() or 1
+    render_workers: int = 2
+
+
+def _fly(
+    world: World, camera_every_n_steps: int | None, on_camera_tick: Callable[[World], None]
+) -> tuple[float, float]:
+    """Fly the scripted legs, calling `on_camera_tick` at the camera rate; returns (wall s, CPU s)."""
+    ap = world.autopilot
+    wall_start, cpu_start = time.perf_counter(), time.process_time()
+    step = 0
+    for seconds, velocity in _FLIGHT:
+        if velocity is None:
+            ap.hold()
+        else:
+            ap.set_velocity_body(velocity[0], velocity[1], velocity[2], 0.0)
+        for _ in range(round(seconds / world.dt_s)):
+            world.step()
+            step += 1
+            if camera_every_n_steps and step % camera_every_n_steps == 0:
+                on_camera_tick(world)
+    return time.perf_counter() - wall_start, time.process_time() - cpu_start
+
+
+def _airborne_world(config: WorldConfig, seed: int) -> World:
+    world = World(config, seed)
+    world.autopilot.arm()
+    world.step(2)
+    world.autopilot.takeoff(1.5)
+    world.run_for(4.0)
+    return world
+
+
+def measure_flight_rtf(settings: SimBenchSettings, camera: str) -> dict[str, float]:
+    """Real-time factor of the scripted flight; camera: "none", "inline" or "workers".
+
+    Also the factor by this process's CPU time, which other load on the machine hardly
+    changes: what an otherwise idle core would give (not meaningful for "workers").
+    """
+    size = settings.camera_size_px
+    config = WorldConfig(camera=CameraConfig(width=size, height=size))
+    frames = 0
+    with _airborne_world(config, settings.seed) as world, contextlib.ExitStack() as stack:
+        every = round(1.0 / (settings.camera_hz * world.dt_s)) if camera != "none" else None
+        if camera == "workers":
+            pool = stack.enter_context(RenderWorkers(config, settings.seed, settings.render_workers))
+
+            def tick(w: World) -> None:
+                nonlocal frames
+                if pool.outstanding == settings.render_workers:
+                    pool.collect()
+                    frames += 1
+                pool.submit(w.state(), noise_seed=int(w.noise_rng.integers(2**31)))
+        else:
+
+            def tick(w: World) -> None:
+                nonlocal frames
+                w.render(with_seg=False)
+                frames += 1
+
+        sim_start = world.time_s
+        wall_s, cpu_s = _fly(world, every, tick)
+        if camera == "workers":
+            t0 = time.perf_counter()
+            while pool.outstanding:
+                pool.collect()
+                frames += 1
+            wall_s += time.perf_counter() - t0
+        sim_s = world.time_s - sim_start
+    return {
+        "sim_s": sim_s,
+        "wall_s": wall_s,
+        "real_time_factor": sim_s / wall_s,
+        "cpu_s_main_process": cpu_s,
+        "cpu_real_time_factor": sim_s / cpu_s,
+        "frames": frames,
+    }
+
+
+def measure_render_ms(settings: SimBenchSettings) -> dict[str, dict[str, float]]:
+    """Per-frame `World.render` wall and CPU time at each size, hovering in front of the target."""
+    out: dict[str, dict[str, float]] = {}
+    for size in settings.render_sizes_px:
+        config = WorldConfig(camera=CameraConfig(width=size, height=size))
+        with World(config, settings.seed) as world:
+            position, yaw = world.scene.pose_for_offset(0.2, -0.1, 2.2, 5.0)
+            world.teleport(position, yaw)
+            row: dict[str, float] = {}
+            for with_seg in (False, True):
+                world.render(with_seg=with_seg)  # warm-up (texture upload)
+                wall, cpu = [], []
+                for _ in range(settings.render_frames):
+                    t0, c0 = time.perf_counter(), time.process_time()
+                    world.render(with_seg=with_seg)
+                    wall.append((time.perf_counter() - t0) * 1e3)
+                    cpu.append((time.process_time() - c0) * 1e3)
+                key = "seg" if with_seg else "no_seg"
+                row[f"p50_ms_{key}"] = float(np.percentile(wall, 50))
+                row[f"p99_ms_{key}"] = float(np.percentile(wall, 99))
+                row[f"cpu_p50_ms_{key}"] = float(np.percentile(cpu, 50))
+            out[str(size)] = row
+    return out
+
+
+def _cpu_s_with_children() -> float:
+    """CPU time of this process and of its finished (waited-for) children."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+def measure_collection(settings: SimBenchSettings) -> dict[str, float]:
+    """Images/s of a small collection at 224 px (worker start-up included), and images per CPU second."""
+    n = settings.collect_images
+    per_sector = max(1, n // 12)
+    with tempfile.TemporaryDirectory(prefix="bench_collect_") as tmp:
+        cfg = CollectConfig(
+            out_dir=Path(tmp) / "data",
+            seed=settings.seed,
+            n_goal=per_sector,
+            n_per_sector=per_sector,
+            n_test=2 * per_sector,
+            n_empty=per_sector,
+            size_px=224,
+            workers=settings.collect_workers,
+        )
+        cpu_start = _cpu_s_with_children()
+        result = collect(cfg, progress=False)
+        cpu_s = _cpu_s_with_children() - cpu_start
+    images = sum(result.counts.values())
+    return {
+        "images": float(images),
+        "seconds": result.seconds,
+        "images_per_s": result.images_per_s,
+        "workers": float(cfg.workers),
+        "cpu_s": cpu_s,
+        "images_per_cpu_s": images / cpu_s,
+    }
+
+
+def run_sim_bench(settings: SimBenchSettings) -> dict[str, Any]:
+    """All measurements as a JSON-able dict."""
+    load_before = os.getloadavg()[0]
+    physics = measure_flight_rtf(settings, camera="none")
+    camera = measure_flight_rtf(settings, camera="inline")
+    parallel = measure_flight_rtf(settings, camera="workers")
+    render = measure_render_ms(settings)
+    collection = measure_collection(settings)
+    return {
+        "machine": {
+            "cpus": os.cpu_count(),
+            "load_avg_1min_before": load_before,
+            "load_avg_1min_after": os.getloadavg()[0],
+        },
+        "physics_no_camera": physics,
+        "physics_camera": {**camera, "camera_hz": settings.camera_hz, "camera_px": settings.camera_size_px},
+        "physics_camera_render_workers": {**parallel, "workers": settings.render_workers},
+        "render_ms": render,
+        "collection_224": collection,
+        "targets": TARGETS,
+    }
+
+
+def format_report(result: dict[str, Any]) -> str:
+    """The human-readable report of `run_sim_bench`'s result."""
+
+    def verdict(value: float, key: str) -> str:
+        return f"target >= {TARGETS[key]:g}: " + ("meets" if value >= TARGETS[key] else "BELOW")
+
+    m, cam = result["machine"], result["physics_camera"]
+    phys = result["physics_no_camera"]["real_time_factor"]
+    inline = cam["real_time_factor"]
+    parallel = result["physics_camera_render_workers"]
+    rtf_workers = parallel["real_time_factor"]
+    coll = result["collection_224"]
+    camera = f"{cam['camera_px']} px camera @ {cam['camera_hz']:g} Hz"
+    lines = [
+        f"machine: {m['cpus']} CPUs, load average {m['load_avg_1min_before']:.2f} before, "
+        f"{m['load_avg_1min_after']:.2f} after (other work on the machine slows every number)",
+        f"physics, no camera:                 {phys:6.1f}x real time ({verdict(phys, 'physics_rtf')}); "
+        f"by CPU time {result['physics_no_camera']['cpu_real_time_factor']:.1f}x",
+        f"physics + {camera}, inline: {inline:6.2f}x real time ({verdict(inline, 'camera_rtf')}); "
+        f"by CPU time {cam['cpu_real_time_factor']:.2f}x",
+        f"physics + {camera}, {parallel['workers']} render workers: {rtf_workers:.2f}x real time "
+        f"({verdict(rtf_workers, 'camera_rtf')})",
+        "render per frame (ms)   p50 no-seg  p99 no-seg   p50 seg   p99 seg   CPU p50 no-seg",
+    ]
+    for size, row in result["render_ms"].items():
+        lines.append(
+            f"  {size:>4} px            {row['p50_ms_no_seg']:9.2f}  {row['p99_ms_no_seg']:10.2f}"
+            f"  {row['p50_ms_seg']:8.2f}  {row['p99_ms_seg']:8.2f}  {row['cpu_p50_ms_no_seg']:14.2f}"
+        )
+    lines.append(
+        f"collection at 224 px: {coll['images_per_s']:.1f} images/s ({coll['images']:.0f} images, "
+        f"{coll['workers']:.0f} workers; {verdict(coll['images_per_s'], 'collect_images_per_s')}); "
+        f"{coll['images_per_cpu_s']:.1f} images per CPU second"
+    )
+    return "\n".join(lines)
+
+
+def bench_main(argv: list[str]) -> int:
+    """Entry point of `dronectl bench sim` (called by tools/bench_cmd.py)."""
+    parser = argparse.ArgumentParser(
+        prog="dronectl bench sim", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--json", type=Path, default=None, help="also write the numbers to this JSON file")
+    parser.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
+    parser.add_argument("--collect-images", type=int, default=400, help="images for the throughput run")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="collection workers")
+    args = parser.parse_args(argv)
+    settings = replace(
+        SimBenchSettings(), seed=args.seed, collect_images=args.collect_images, collect_workers=args.workers
+    )
+    result = run_sim_bench(settings)
+    print(format_report(result))
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+        print(f"wrote {args.json}")
+    return 0

@@ -1,0 +1,199 @@
+"""The forward camera as MJPEG, rendered in its own process.
+
+PyBullet holds the GIL while it renders (12 ms per 224 px frame on an idle core of
+this machine, 40+ ms when loaded), so rendering inside the vehicle loop stalled
+command acks and telemetry. As PX4 SITL leaves the camera to its simulator process,
+the vehicle leaves it to a render process: that process rebuilds the same scene
+from the same config and seed, and for each frame poses its drone as the vehicle's
+drone was last seen (a shared array the vehicle loop overwrites after each physics
+batch), renders, and publishes image + truth through `sim_world.mjpeg.MjpegServer`.
+
+The truth (target pixel centre/bbox, drone pose) is for the test harness only,
+via `/truth.json`; nothing of it goes over MAVLink.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import multiprocessing as mp
+import signal
+import time
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from typing import Any
+
+import numpy as np
+import pybullet as p
+
+from sim_world.frames import enu_to_ned, yaw_enu_to_ned_rad
+from sim_world.mjpeg import MjpegServer
+from sim_world.world import World, WorldConfig
+
+log = logging.getLogger(__name__)
+
+# Shared pose layout: position ENU (3), quaternion xyzw (4), velocity ENU (3), sim time.
+_POSE_LEN = 11
+
+
+class VideoError(RuntimeError):
+    """The render process could not start or serve (port in use, scene error, ...)."""
+
+
+@dataclass(frozen=True)
+class VideoConfig:
+    host: str = "127.0.0.1"
+    port: int = 8080
+    fps: float = 15.0
+    jpeg_quality: int = 85
+    start_timeout_s: float = 60.0  # a fresh interpreter importing pybullet and building the scene
+
+
+class WorldVideoFeed:
+    """Vehicle-side handle of the render process; `capture()` from the vehicle loop only."""
+
+    def __init__(self, world: World, origin_enu_m: np.ndarray, config: VideoConfig):
+        self._world = world
+        self.config = config
+        ctx = mp.get_context("spawn")  # no fork of a process that holds a PyBullet client and threads
+        self._pose = ctx.Array("d", _POSE_LEN)
+        self._frames = ctx.Value("q", 0)
+        self._render_s = ctx.Value("d", 0.0)
+        self._stop = ctx.Event()
+        self._conn, self._child_conn = ctx.Pipe(duplex=False)
+        self.capture()
+        self._proc = ctx.Process(
+            target=_serve,
+            args=(world.config, world.seed, np.asarray(origin_enu_m, float), config, self._pose, self._stop),
+            kwargs={"conn": self._child_conn, "frames": self._frames, "render_s": self._render_s},
+            name="sim-vehicle-video",
+            daemon=True,
+        )
+        self.stream_url = ""
+
+    @property
+    def truth_url(self) -> str:
+        return self.stream_url.replace("/stream.mjpg", "/truth.json")
+
+    @property
+    def frames(self) -> int:
+        return int(self._frames.value)
+
+    @property
+    def mean_render_ms(self) -> float:
+        n = self.frames
+        return 1000.0 * self._render_s.value / n if n else 0.0
+
+    def start(self) -> None:
+        """Spawn the render process and wait until it serves; VideoError naming the port otherwise."""
+        self._proc.start()
+        self._child_conn.close()  # the child's end lives in the child now
+        if not self._conn.poll(self.config.start_timeout_s):
+            self.close()
+            raise VideoError(f"video process did not start within {self.config.start_timeout_s:.0f} s")
+        kind, detail = self._conn.recv()
+        if kind != "ready":
+            self.close()
+            raise VideoError(f"video on {self.config.host}:{self.config.port}: {detail}")
+        self.stream_url = detail
+        log.info("video %s (render process %d)", self.stream_url, self._proc.pid)
+
+    def capture(self) -> None:
+        """Hand the drone's current pose to the render process (cheap: no rendering here)."""
+        s = self._world.state()
+        values = [*s.position_enu_m, *s.quaternion_xyzw, *s.velocity_enu_m_s, self._world.time_s]
+        with self._pose.get_lock():
+            self._pose[:] = values
+
+    @property
+    def alive(self) -> bool:
+        return self._proc.is_alive()
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        self._stop.set()
+        if self._proc.pid is not None:
+            self._proc.join(timeout_s)
+            if self._proc.is_alive():
+                log.warning("video process did not stop; terminating it")
+                self._proc.terminate()
+                self._proc.join(timeout_s)
+        self._conn.close()
+
+
+def _serve(
+    world_config: WorldConfig,
+    seed: int,
+    origin_enu_m: np.ndarray,
+    config: VideoConfig,
+    pose: Any,
+    stop: Any,
+    conn: Connection,
+    frames: Any,
+    render_s: Any,
+) -> None:
+    """The render process: same scene, drone posed from `pose`, frames at `config.fps`."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent stops us
+    try:
+        world = World(world_config, seed)
+    except Exception as exc:
+        conn.send(("error", f"cannot build the world: {exc}"))
+        return
+    with world:
+        try:
+            server = MjpegServer(config.host, config.port, jpeg_quality=config.jpeg_quality)
+        except OSError as exc:
+            conn.send(("error", str(exc)))
+            return
+        with server:
+            conn.send(("ready", server.stream_url))
+            period = 1.0 / config.fps
+            next_t = time.monotonic()
+            while not stop.is_set():
+                t0 = time.monotonic()
+                with pose.get_lock():
+                    values = list(pose)
+                p.resetBasePositionAndOrientation(
+                    world.drone.body_id, values[0:3], values[3:7], physicsClientId=world.client_id
+                )
+                render = world.render(with_seg=True)
+                server.publish(render.rgb, frame_truth(world, render, values, origin_enu_m))
+                with frames.get_lock():
+                    frames.value += 1
+                    render_s.value += time.monotonic() - t0
+                next_t = max(next_t + period, time.monotonic())
+                stop.wait(max(0.0, next_t - time.monotonic()))
+
+
+def frame_truth(world: World, render: Any, pose: list[float], origin_enu_m: np.ndarray) -> dict[str, Any]:
+    """JSON-able truth of one frame: the target in pixels and the drone's pose (ENU and NED from home)."""
+    truth = world.target_truth(render)
+    position = np.asarray(pose[0:3])
+    yaw_enu = world.state().yaw_enu_rad
+    return {
+        "time_s": round(pose[10], 4),
+        "target": {
+            "kind": world.scene.target_kind,
+            "centre_px": _floats(truth.centre_px),
+            "offset_px": _floats(truth.offset_px),
+            "bbox_px": None if truth.bbox_px is None else _floats(truth.bbox_px),
+            "in_view": bool(truth.in_view),
+            "fully_in_view": bool(truth.fully_in_view),
+            "visible_fraction": float(truth.visible_fraction),
+            "depth_m": _finite(truth.depth_m),
+            "image_size": [int(v) for v in truth.image_size],
+        },
+        "drone": {
+            "position_enu_m": _floats(position),
+            "position_ned_m": _floats(enu_to_ned(position - origin_enu_m)),
+            "velocity_ned_m_s": _floats(enu_to_ned(pose[7:10])),
+            "yaw_deg": math.degrees(yaw_enu_to_ned_rad(yaw_enu)),
+        },
+    }
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def _floats(values: Any) -> list[float | None]:
+    return [_finite(float(v)) for v in values]

@@ -1,0 +1,276 @@
+"""The simulated drone's video: an HTTP MJPEG server, as IP cameras and drone video bridges serve.
+
+Push design: whoever renders calls `publish(image, truth)`; the frame is JPEG-encoded
+once, in the caller's thread, and every connected client is woken to send it. A slow
+client skips frames and always gets the newest one; nothing is queued, so the
+server adds no latency of its own and never grows a backlog.
+
+Endpoints:
+- `/stream.mjpg`: `multipart/x-mixed-replace` JPEG parts with `Content-Length`
+  (what OpenCV/FFmpeg, browsers and VLC read); starts with the latest frame.
+- `/frame.jpg`: the latest frame, header `X-Frame-Number`.
+- `/truth.json`: the truth published with the latest frame, or with frame N via
+  `/truth.json?frame=N` (the last `truth_history` frames). For the test harness
+  only: the controller must never read it.
+
+Binds loopback by default. Imports nothing of ours (it belongs to the simulated vehicle).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+from collections import OrderedDict
+from dataclasses import dataclass
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from types import TracebackType
+from typing import Any
+from urllib.parse import parse_qs, urlsplit
+
+import cv2
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+BOUNDARY = "mjpegframe"
+_WAKE_INTERVAL_S = 0.2  # how often idle stream handlers look at the closing flag
+
+
+@dataclass(frozen=True)
+class PublishedFrame:
+    """One encoded frame as the server holds it."""
+
+    number: int
+    timestamp_s: float  # time.monotonic() at publish
+    jpeg: bytes
+
+
+class MjpegServer:
+    """Serve published frames over HTTP MJPEG; `close()` or use as a context manager.
+
+    `port=0` picks a free port (see `.port` / `.stream_url`). `client_timeout_s`
+    bounds every socket write, so a client that stops reading is dropped instead
+    of holding a thread forever.
+    """
+
+    def __init__(
+        self,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        jpeg_quality: int = 90,
+        truth_history: int = 256,
+        client_timeout_s: float = 5.0,
+    ) -> None:
+        if not 1 <= jpeg_quality <= 100:
+            raise ValueError(f"jpeg_quality must be in [1, 100], got {jpeg_quality}")
+        if truth_history < 1:
+            raise ValueError(f"truth_history must be >= 1, got {truth_history}")
+        self._jpeg_params = [int(cv2.IMWRITE_JPEG_QUALITY), int(jpeg_quality)]
+        self._truth_history = truth_history
+        self._cond = threading.Condition()
+        self._latest: PublishedFrame | None = None
+        self._truths: OrderedDict[int, Any] = OrderedDict()
+        self._next_number = 0
+        self._closing = False
+        self._clients: set[threading.Thread] = set()
+        try:
+            self._httpd = _Httpd((host, port), _Handler, self, client_timeout_s)
+        except OSError as exc:
+            raise OSError(exc.errno, f"MJPEG server cannot bind {host}:{port}: {exc.strerror}") from exc
+        self._thread = threading.Thread(
+            target=self._httpd.serve_forever, kwargs={"poll_interval": 0.1}, name="mjpeg-server", daemon=True
+        )
+        self._thread.start()
+        log.info("MJPEG server on %s", self.stream_url)
+
+    @property
+    def host(self) -> str:
+        return str(self._httpd.server_address[0])
+
+    @property
+    def port(self) -> int:
+        return int(self._httpd.server_address[1])
+
+    @property
+    def stream_url(self) -> str:
+        return f"http://{self.host}:{self.port}/stream.mjpg"
+
+    @property
+    def frames_published(self) -> int:
+        return self._next_number
+
+    def publish(self, image_rgb: np.ndarray, truth: Any = None) -> int:
+        """Encode an RGB uint8 (H, W, 3) image as the newest frame; returns its frame number.
+
+        `truth` (anything JSON-serialisable) is served at `/truth.json` beside it.
+        """
+        image = np.asarray(image_rgb)
+        if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+            raise ValueError(f"publish needs an RGB uint8 (H, W, 3) image, got {image.dtype} {image.shape}")
+        ok, buf = cv2.imencode(".jpg", cv2.cvtColor(image, cv2.COLOR_RGB2BGR), self._jpeg_params)
+        if not ok:
+            raise RuntimeError(f"JPEG encoding failed for an image of shape {image.shape}")
+        truth_json = json.dumps(truth) if truth is not None else None  # fail here, not in a handler
+        with self._cond:
+            number = self._next_number
+            self._next_number += 1
+            self._latest = PublishedFrame(number, time.monotonic(), buf.tobytes())
+            if truth_json is not None:
+                self._truths[number] = truth_json
+                while len(self._truths) > self._truth_history:
+                    self._truths.popitem(last=False)
+            self._cond.notify_all()
+        return number
+
+    def latest(self) -> PublishedFrame | None:
+        with self._cond:
+            return self._latest
+
+    def wait_newer(self, after_number: int, timeout_s: float) -> PublishedFrame | None:
+        """The latest frame if its number is above `after_number`, waiting up to `timeout_s`."""
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while not self._closing:
+                if self._latest is not None and self._latest.number > after_number:
+                    return self._latest
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return None
+                self._cond.wait(remaining)
+        return None
+
+    def truth_json(self, number: int | None) -> str | None:
+        """The truth JSON of frame `number` (the latest frame when None)."""
+        with self._cond:
+            if number is None:
+                if self._latest is None or self._latest.number not in self._truths:
+                    return None
+                number = self._latest.number
+            body = self._truths.get(number)
+        return None if body is None else f'{{"frame_number": {number}, "truth": {body}}}'
+
+    @property
+    def closing(self) -> bool:
+        return self._closing
+
+    def _register(self, thread: threading.Thread, add: bool) -> None:
+        with self._cond:
+            (self._clients.add if add else self._clients.discard)(thread)
+
+    def close(self, timeout_s: float = 2.0) -> None:
+        """Stop serving, end every stream and free the port (idempotent)."""
+        with self._cond:
+            if self._closing:
+                return
+            self._closing = True
+            self._cond.notify_all()
+            clients = list(self._clients)
+        self._httpd.shutdown()
+        self._httpd.server_close()
+        self._thread.join(timeout_s)
+        for thread in clients:
+            thread.join(timeout_s)
+        log.info("MJPEG server on port %d closed after %d frames", self.port, self._next_number)
+
+    def __enter__(self) -> MjpegServer:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+class _Httpd(ThreadingHTTPServer):
+    daemon_threads = True
+    allow_reuse_address = True
+
+    def __init__(
+        self, address: tuple[str, int], handler: type, owner: MjpegServer, client_timeout_s: float
+    ) -> None:
+        self.owner = owner
+        self.client_timeout_s = client_timeout_s
+        super().__init__(address, handler)
+
+
+class _Handler(BaseHTTPRequestHandler):
+    server: _Httpd
+    protocol_version = "HTTP/1.0"
+
+    def setup(self) -> None:
+        self.timeout = self.server.client_timeout_s  # bounds every read and write on this socket
+        super().setup()
+
+    def log_message(self, format: str, *args: Any) -> None:
+        log.debug("%s %s", self.address_string(), format % args)
+
+    def do_GET(self) -> None:
+        url = urlsplit(self.path)
+        try:
+            if url.path == "/stream.mjpg":
+                self._stream()
+            elif url.path == "/frame.jpg":
+                self._frame()
+            elif url.path == "/truth.json":
+                self._truth(url.query)
+            else:
+                self.send_error(404, f"no such path {url.path}; try /stream.mjpg, /frame.jpg, /truth.json")
+        except (TimeoutError, BrokenPipeError, ConnectionResetError) as exc:
+            log.debug("client %s left: %s", self.address_string(), exc)
+
+    def _send_body(self, content_type: str, body: bytes, headers: dict[str, str] | None = None) -> None:
+        self.send_response(200)
+        self.send_header("Content-Type", content_type)
+        self.send_header("Content-Length", str(len(body)))
+        self.send_header("Cache-Control", "no-store")
+        for key, value in (headers or {}).items():
+            self.send_header(key, value)
+        self.end_headers()
+        self.wfile.write(body)
+
+    def _frame(self) -> None:
+        frame = self.server.owner.latest()
+        if frame is None:
+            self.send_error(503, "no frame published yet")
+            return
+        self._send_body("image/jpeg", frame.jpeg, {"X-Frame-Number": str(frame.number)})
+
+    def _truth(self, query: str) -> None:
+        values = parse_qs(query).get("frame")
+        try:
+            number = int(values[0]) if values else None
+        except ValueError:
+            self.send_error(400, f"frame must be an integer, got {values[0]!r}")
+            return
+        body = self.server.owner.truth_json(number)
+        if body is None:
+            self.send_error(404, f"no truth for frame {number if number is not None else '(latest)'}")
+            return
+        self._send_body("application/json", body.encode())
+
+    def _stream(self) -> None:
+        owner = self.server.owner
+        self.send_response(200)
+        self.send_header("Content-Type", f"multipart/x-mixed-replace; boundary={BOUNDARY}")
+        self.send_header("Cache-Control", "no-store")
+        self.send_header("Connection", "close")
+        self.end_headers()
+        me = threading.current_thread()
+        owner._register(me, add=True)
+        try:
+            last = -1
+            while not owner.closing:
+                frame = owner.wait_newer(last, _WAKE_INTERVAL_S)
+                if frame is None:
+                    continue
+                header = (
+                    f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\nContent-Length: {len(frame.jpeg)}\r\n"
+                    f"X-Frame-Number: {frame.number}\r\n\r\n"
+                ).encode()
+                self.wfile.write(header + frame.jpeg + b"\r\n")
+                self.wfile.flush()
+                last = frame.number
+        finally:
+            owner._register(me, add=False)

@@ -1,0 +1,129 @@
+"""`dronectl sim-vehicle`: build the PyBullet world and serve it as a MAVLink vehicle until stopped.
+
+The drone starts landed. With a start offset (right, up, distance, yaw relative to the
+centred pose in front of the target, as `Scene.pose_for_offset`) it starts on the
+floor below that pose with that heading, and MIS_TAKEOFF_ALT is set so that a
+plain takeoff climbs exactly to the pose (an explicit MIS_TAKEOFF_ALT override wins).
+A hovering start is not offered: PX4 boots on the ground, so must the sim.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from sim_world.camera import CameraConfig
+from sim_world.mavlink.config import SimVehicleConfig
+from sim_world.mavlink.params import PX4_PARAMS
+from sim_world.mavlink.video import VideoConfig, WorldVideoFeed
+from sim_world.mavlink.world_model import WorldVehicleModel
+from sim_world.mavlink_vehicle import LoopStats, SimVehicle
+from sim_world.scene_config import DEFAULT_SCENE, load_scene_config
+from sim_world.world import World, WorldConfig
+
+log = logging.getLogger(__name__)
+
+_TAKEOFF_SPEC = next(s for s in PX4_PARAMS if s.name == "MIS_TAKEOFF_ALT")
+
+
+@dataclass(frozen=True)
+class StartOffset:
+    """Where the drone starts, relative to the centred pose in front of the target."""
+
+    right_m: float = 0.0
+    up_m: float = 0.0
+    distance_m: float = 2.5
+    yaw_deg: float = 0.0
+
+    @classmethod
+    def parse(cls, text: str) -> StartOffset:
+        """From "right,up,distance,yaw" (metres, metres, metres, degrees)."""
+        parts = text.split(",")
+        try:
+            values = [float(v) for v in parts]
+        except ValueError:
+            raise ValueError(f"start offset {text!r}: expected four numbers right,up,distance,yaw") from None
+        if len(values) != 4:
+            raise ValueError(f"start offset {text!r}: expected four numbers right,up,distance,yaw")
+        offset = cls(*values)
+        if offset.distance_m <= 0.3:
+            raise ValueError(f"start offset {text!r}: distance must be > 0.3 m")
+        return offset
+
+
+@dataclass(frozen=True)
+class SimVehicleRun:
+    """Everything `dronectl sim-vehicle` needs: the vehicle, the world and how long to run."""
+
+    vehicle: SimVehicleConfig = field(default_factory=SimVehicleConfig)
+    scene_file: Path | None = None
+    seed: int = 0
+    start_offset: StartOffset | None = None
+    image_size_px: int = 224
+    duration_s: float | None = None  # None: until stopped
+    status_every_s: float = 0.0  # log the loop statistics this often (0: never)
+
+
+def build_world(run: SimVehicleRun) -> tuple[World, SimVehicleConfig]:
+    """The world with the drone placed, and the vehicle config with MIS_TAKEOFF_ALT filled in."""
+    scene = DEFAULT_SCENE if run.scene_file is None else load_scene_config(run.scene_file)
+    camera = CameraConfig(width=run.image_size_px, height=run.image_size_px)
+    world = World(WorldConfig(scene=scene, camera=camera), seed=run.seed)
+    vehicle = run.vehicle
+    if run.start_offset is not None:
+        o = run.start_offset
+        position, yaw_enu = world.scene.pose_for_offset(o.right_m, o.up_m, o.distance_m, o.yaw_deg)
+        ground = world.drone.resting_height_m
+        world.drone.set_pose((float(position[0]), float(position[1]), ground), yaw_enu)
+        climb = min(max(float(position[2]) - ground, _TAKEOFF_SPEC.minimum), _TAKEOFF_SPEC.maximum)
+        if "MIS_TAKEOFF_ALT" not in vehicle.params:
+            vehicle = replace(vehicle, params={**vehicle.params, "MIS_TAKEOFF_ALT": round(climb, 3)})
+        log.info("start below %s (ENU), takeoff climbs %.2f m", [round(float(v), 2) for v in position], climb)
+    return world, vehicle
+
+
+def run_sim_vehicle(
+    run: SimVehicleRun,
+    stop: threading.Event | None = None,
+    on_ready: Callable[[SimVehicle], None] | None = None,
+) -> LoopStats:
+    """Serve the world until `stop` is set or `duration_s` passes; returns the loop statistics.
+
+    `on_ready(vehicle)` (a callable) is called once the ports are open.
+    """
+    stop = stop or threading.Event()
+    world, vehicle_config = build_world(run)
+    with world:
+        model = WorldVehicleModel(world)
+        video = None
+        if vehicle_config.video:
+            video = WorldVideoFeed(
+                world,
+                model.origin_enu_m,
+                VideoConfig(
+                    vehicle_config.video_host, vehicle_config.http_video_port, vehicle_config.video_fps
+                ),
+            )
+        with SimVehicle(model, vehicle_config, video=video) as vehicle:
+            if on_ready is not None:
+                on_ready(vehicle)
+            waited = 0.0
+            period = run.status_every_s if run.status_every_s > 0 else 0.5
+            while not stop.is_set() and vehicle.running:
+                if run.duration_s is not None and waited >= run.duration_s:
+                    break
+                step = period if run.duration_s is None else min(period, run.duration_s - waited)
+                stop.wait(step)
+                waited += step
+                if run.status_every_s > 0:
+                    s = vehicle.stats()
+                    log.info(
+                        "sim %.1f s / wall %.1f s (x%.2f), %s, %d frames (%.1f ms), %d msgs in, %d out",
+                        s.sim_s, s.wall_s, s.real_time_factor, vehicle.mode.name, s.video_frames,
+                        s.mean_render_ms, s.messages_in, s.messages_out,
+                    )  # fmt: skip
+            stats = vehicle.stats()
+    return stats

@@ -1,0 +1,130 @@
+"""A small pymavlink ground station for tests of the simulated vehicle, over real UDP.
+
+It binds the port the vehicle sends to (as MAVSDK's `udpin://` does), records every
+message with its arrival time on a reader thread, and offers waits with timeouts.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import common as mavlink
+
+Msg = mavlink.MAVLink_message
+
+
+@dataclass(frozen=True)
+class Received:
+    t: float  # time.monotonic() at arrival
+    msg: Msg
+
+
+class MavlinkTestClient:
+    """Listens on `listen_port`; sends to the vehicle once it has heard from it."""
+
+    def __init__(self, listen_port: int, sysid: int = 245, compid: int = 190):
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.bind(("127.0.0.1", listen_port))
+        self._sock.settimeout(0.05)
+        self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+        self._parser = mavlink.MAVLink(None)
+        self._parser.robust_parsing = True
+        self._lock = threading.Lock()
+        self.received: list[Received] = []
+        self.vehicle: tuple[str, int] | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, addr = self._sock.recvfrom(65535)
+            except (TimeoutError, OSError):
+                continue
+            now = time.monotonic()
+            msgs = [
+                m
+                for m in self._parser.parse_buffer(data) or []
+                if not isinstance(m, mavlink.MAVLink_bad_data)
+            ]
+            with self._lock:
+                self.vehicle = addr
+                self.received.extend(Received(now, m) for m in msgs)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self._sock.close()
+
+    def __enter__(self) -> MavlinkTestClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ----------------------------------------------------------------- reading
+    def since(self, t: float, kind: str | None = None) -> list[Received]:
+        with self._lock:
+            return [r for r in self.received if r.t >= t and (kind is None or r.msg.get_type() == kind)]
+
+    def wait_for(
+        self,
+        kind: str,
+        timeout_s: float,
+        where: Callable[[Msg], bool] = lambda m: True,
+        after: float | None = None,
+    ) -> Msg:
+        """The first `kind` message (arrived after `after`, default now) that satisfies `where`."""
+        start = time.monotonic() if after is None else after
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            for r in self.since(start, kind):
+                if where(r.msg):
+                    return r.msg
+            time.sleep(0.01)
+        raise TimeoutError(f"no {kind} matching the condition within {timeout_s} s")
+
+    def wait_vehicle(self, timeout_s: float = 5.0) -> Msg:
+        hb = self.wait_for("HEARTBEAT", timeout_s, after=0.0)
+        assert self.vehicle is not None
+        return hb
+
+    def heartbeat_after(self, t: float, timeout_s: float = 3.0) -> Msg:
+        return self.wait_for("HEARTBEAT", timeout_s, after=t)
+
+    # ----------------------------------------------------------------- sending
+    def send(self, msg: Msg) -> None:
+        if self.vehicle is None:
+            raise RuntimeError("no heartbeat from the vehicle yet")
+        self._sock.sendto(msg.pack(self._mav), self.vehicle)
+        self._mav.seq = (self._mav.seq + 1) % 256
+
+    def command(self, command: int, *params: float, timeout_s: float = 2.0, target: int = 1) -> list[int]:
+        """Send COMMAND_LONG; return the results of the acks that arrive within 0.2 s of the first."""
+        p = [*params, *[0.0] * (7 - len(params))]
+        t0 = time.monotonic()
+        self.send(mavlink.MAVLink_command_long_message(target, 1, command, 0, *p))
+        self.wait_for("COMMAND_ACK", timeout_s, lambda m: m.command == command, after=t0)
+        time.sleep(0.2)
+        return [r.msg.result for r in self.since(t0, "COMMAND_ACK") if r.msg.command == command]
+
+    def setpoint(self, frame: int, vx: float, vy: float, vz: float, yaw_rate: float = 0.0) -> None:
+        self.send(
+            mavlink.MAVLink_set_position_target_local_ned_message(
+                0, 1, 1, frame, 1479, 0, 0, 0, vx, vy, vz, 0, 0, 0, 0, yaw_rate
+            )
+        )
+
+    def texts(self, after: float = 0.0) -> list[str]:
+        return [r.msg.text for r in self.since(after, "STATUSTEXT")]
+
+    def rate_hz(self, kind: str, seconds: float) -> float:
+        """Count `kind` messages over the next `seconds`."""
+        t0 = time.monotonic()
+        time.sleep(seconds)
+        return len([r for r in self.since(t0, kind) if r.t <= t0 + seconds]) / seconds

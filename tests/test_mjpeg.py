@@ -1,0 +1,105 @@
+"""The simulated vehicle's MJPEG server: endpoints, truth, input checks and clean shutdown."""
+
+from __future__ import annotations
+
+import json
+import socket
+import urllib.error
+import urllib.request
+
+import cv2
+import numpy as np
+import pytest
+
+from sim_world.mjpeg import BOUNDARY, MjpegServer
+
+PORT = 18000
+
+
+def _get(url: str) -> tuple[int, dict[str, str], bytes]:
+    try:
+        with urllib.request.urlopen(url, timeout=3.0) as resp:
+            return resp.status, dict(resp.headers), resp.read()
+    except urllib.error.HTTPError as exc:
+        return exc.code, dict(exc.headers), exc.read()
+
+
+def _image(value: int) -> np.ndarray:
+    img = np.zeros((48, 64, 3), np.uint8)
+    img[:, :, 0] = value  # red channel only: checks the RGB order survives the BGR encoder
+    return img
+
+
+def test_frame_endpoint_serves_latest_frame_and_number() -> None:
+    with MjpegServer(port=PORT) as server:
+        base = f"http://127.0.0.1:{server.port}"
+        status, _, _ = _get(base + "/frame.jpg")
+        assert status == 503  # nothing published yet
+        assert server.publish(_image(40)) == 0
+        assert server.publish(_image(200)) == 1
+        status, headers, body = _get(base + "/frame.jpg")
+        assert status == 200
+        assert headers["Content-Type"] == "image/jpeg"
+        assert headers["X-Frame-Number"] == "1"
+        bgr = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_COLOR)
+        assert bgr.shape == (48, 64, 3)
+        assert abs(int(bgr[..., 2].mean()) - 200) <= 3  # red, newest frame
+        assert int(bgr[..., 0].max()) <= 8
+
+
+def test_truth_endpoint_latest_and_by_frame() -> None:
+    with MjpegServer(port=PORT + 1, truth_history=2) as server:
+        base = f"http://127.0.0.1:{server.port}"
+        for i in range(3):
+            server.publish(_image(i), truth={"centre_px": [i, 2 * i]})
+        status, _, body = _get(base + "/truth.json")
+        assert status == 200
+        assert json.loads(body) == {"frame_number": 2, "truth": {"centre_px": [2, 4]}}
+        assert json.loads(_get(base + "/truth.json?frame=1")[2])["truth"] == {"centre_px": [1, 2]}
+        assert _get(base + "/truth.json?frame=0")[0] == 404  # fell out of the 2-frame history
+        assert _get(base + "/truth.json?frame=x")[0] == 400
+        assert _get(base + "/nothing")[0] == 404
+
+
+def test_stream_sends_multipart_jpeg_parts() -> None:
+    with MjpegServer(port=PORT + 2) as server:
+        server.publish(_image(10))
+        with socket.create_connection(("127.0.0.1", server.port), timeout=3.0) as sock:
+            sock.sendall(b"GET /stream.mjpg HTTP/1.0\r\n\r\n")
+            data = b""
+            while data.count(b"\xff\xd9") < 1:
+                data += sock.recv(65536)
+            server.publish(_image(20))
+            while data.count(b"\xff\xd9") < 2:
+                data += sock.recv(65536)
+        head, _, rest = data.partition(b"\r\n\r\n")
+        assert f"multipart/x-mixed-replace; boundary={BOUNDARY}".encode() in head
+        assert rest.startswith(f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\n".encode())
+        assert b"X-Frame-Number: 0" in rest and b"X-Frame-Number: 1" in rest
+
+
+def test_publish_rejects_bad_images_and_truth() -> None:
+    with MjpegServer(port=PORT + 3) as server:
+        with pytest.raises(ValueError, match="RGB uint8"):
+            server.publish(np.zeros((8, 8), np.uint8))
+        with pytest.raises(ValueError, match="RGB uint8"):
+            server.publish(np.zeros((8, 8, 3), np.float32))
+        with pytest.raises(TypeError):
+            server.publish(_image(1), truth={"x": object()})
+        assert server.frames_published == 0
+
+
+def test_close_ends_streams_and_frees_the_port() -> None:
+    server = MjpegServer(port=PORT + 4)
+    server.publish(_image(5))
+    sock = socket.create_connection(("127.0.0.1", server.port), timeout=3.0)
+    sock.sendall(b"GET /stream.mjpg HTTP/1.0\r\n\r\n")
+    sock.recv(4096)
+    server.close()
+    server.close()  # idempotent
+    data = b""
+    while chunk := sock.recv(65536):  # the server closed the stream: recv returns b""
+        data += chunk
+    sock.close()
+    with MjpegServer(port=PORT + 4) as again:  # the port is free again
+        assert again.port == PORT + 4
