@@ -1,0 +1,36 @@
+"""`dronectl bench sim|perception|flight [options]`: the speed benchmarks.
+
+Each benchmark lives with the code it measures, in a module exposing
+`bench_main(argv: list[str]) -> int`; this command only picks the module (imported
+lazily, so one benchmark never pays for another's imports) and hands it the rest
+of the command line. `dronectl bench <name> --help` shows a benchmark's options.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+BENCHMARKS: dict[str, tuple[str, str]] = {
+    "sim": ("sim_world.bench", "physics and camera real-time factors, render times, collection throughput"),
+    "perception": ("perception.bench", "detector and planner inference speed"),
+    "flight": ("flight.bench", "vehicle command and telemetry latency"),
+}
+
+
+def _usage() -> str:
+    lines = ["usage: dronectl bench <benchmark> [options]", "", "benchmarks:"]
+    lines += [f"  {name:<11} {help_}" for name, (_, help_) in BENCHMARKS.items()]
+    return "\n".join(lines)
+
+
+def main(argv: list[str]) -> int:
+    if not argv or argv[0] in ("-h", "--help"):
+        print(_usage())
+        return 0
+    name, rest = argv[0], argv[1:]
+    if name not in BENCHMARKS:
+        print(f"dronectl bench: unknown benchmark {name!r}\n\n{_usage()}", file=sys.stderr)
+        return 2
+    module = importlib.import_module(BENCHMARKS[name][0])
+    return int(module.bench_main(rest) or 0)
