@@ -1,0 +1,205 @@
+"""`dronectl bench flight`: the flight layer's speed, measured on loopback against `dronectl sim-vehicle`.
+
+Prints (and with `--json FILE` writes):
+- time from process start (the sim-vehicle's launch) to offboard active, with the
+  milestones in between (the vehicle's PX4-like arming delay and the takeoff climb
+  are most of it) and discovery → offboard;
+- the setpoint rate achieved at the vehicle: SET_POSITION_TARGET_LOCAL_NED counted
+  by a relay in the UDP path while the controller holds in offboard (MAVSDK's own
+  20 Hz re-send), with the largest gap;
+- command round trip (Hold while holding: COMMAND_LONG → COMMAND_ACK) p50/p99;
+- one discrete move's wall time for each backend (MAVSDK: real time; PyBullet: in-process).
+Targets (issue 3): discovery → offboard ≤ 5 s, setpoint stream ≥ 20 Hz, RTT p99 ≤ 50 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+from flight.moves import execute_move
+from flight.pybullet_backend import PyBulletVehicle
+from flight.relay import SET_POSITION_TARGET_LOCAL_NED, MavlinkRelay
+from flight.safe_vehicle import SafeVehicle
+from flight.safety import flight_guard
+from flight.scenario import MoveFlight, fly_move
+from flight.sim_process import SimVehicleOptions, SimVehicleProcess
+from flight.types import VelocityBody
+
+log = logging.getLogger(__name__)
+
+TARGETS = {"discovery_to_offboard_s": 5.0, "setpoint_rate_hz": 20.0, "command_rtt_p99_ms": 50.0}
+
+
+@dataclass(frozen=True)
+class FlightBenchConfig:
+    base_port: int = 14790  # sim binds base, sends to base+1 (relay), MAVSDK listens on base+2
+    rtt_samples: int = 200
+    stream_window_s: float = 3.0
+    boot_delay_s: float = 2.5  # PX4's arming delay after boot
+    move: MoveFlight = field(default_factory=MoveFlight)
+    seed: int = 0
+
+
+def _mavsdk_bench(config: FlightBenchConfig) -> dict[str, Any]:
+    base, move = config.base_port, config.move
+    t0 = time.perf_counter()
+    options = SimVehicleOptions(local_port=base, remote_port=base + 1, boot_delay_s=config.boot_delay_s)
+    with (
+        SimVehicleProcess(options) as sim,
+        MavlinkRelay(listen_port=base + 1, client_port=base + 2) as relay,
+        MavsdkVehicle(MavsdkConfig(url=f"udpin://127.0.0.1:{base + 2}")) as vehicle,
+    ):
+        marks = {"sim_ready_s": time.perf_counter() - t0}
+        safe = SafeVehicle(vehicle)
+        safe.connect()
+        marks["discovered_s"] = time.perf_counter() - t0
+        with flight_guard(safe):
+            safe.wait_ready()
+            safe.arm()
+            marks["armed_s"] = time.perf_counter() - t0
+            safe.takeoff(move.takeoff_alt_m)
+            marks["airborne_s"] = time.perf_counter() - t0
+            safe.set_velocity_body(VelocityBody())
+            safe.start_offboard()
+            marks["offboard_active_s"] = time.perf_counter() - t0
+
+            idle_start = time.monotonic()
+            safe.sleep(config.stream_window_s)  # the controller is silent: MAVSDK streams on its own
+            holding = _stream_stats(relay, idle_start, time.monotonic())
+            move_start = time.monotonic()
+            result = execute_move(
+                safe, move.velocity, move.duration_s, move.settle_speed_m_s, move.settle_timeout_s
+            )
+            moving = _stream_stats(relay, move_start, move_start + move.duration_s)
+            safe.stop_offboard()
+            rtts_ms = np.array([vehicle.command_round_trip_s() * 1000.0 for _ in range(config.rtt_samples)])
+            safe.land()
+            safe.disarm()
+        sim_log_tail = sim.output()[-500:]
+    log.debug("sim-vehicle said: %s", sim_log_tail)
+    return {
+        "process_start_to": marks,
+        "discovery_to_offboard_s": marks["offboard_active_s"] - marks["discovered_s"],
+        "arming_wait_s": marks["armed_s"] - marks["discovered_s"],
+        "takeoff_climb_s": marks["airborne_s"] - marks["armed_s"],
+        "setpoint_stream_holding": holding,
+        "setpoint_stream_moving": moving,
+        "command_rtt_ms": {
+            "p50": float(np.percentile(rtts_ms, 50)),
+            "p99": float(np.percentile(rtts_ms, 99)),
+            "n": int(rtts_ms.size),
+        },
+        "move_wall_s": result.wall_time_s,
+        "move_right_m": result.displacement.right_m,
+    }
+
+
+def _stream_stats(relay: MavlinkRelay, start_s: float, end_s: float) -> dict[str, float]:
+    """Rate and largest gap of the setpoints that reached the vehicle between two monotonic times."""
+    times = [t for t in relay.message_times_s(SET_POSITION_TARGET_LOCAL_NED) if start_s <= t <= end_s]
+    if len(times) < 2:
+        return {"rate_hz": 0.0, "max_gap_ms": float("nan"), "count": len(times)}
+    return {
+        "rate_hz": (len(times) - 1) / (times[-1] - times[0]),
+        "max_gap_ms": float(np.max(np.diff(times)) * 1000.0),
+        "count": len(times),
+    }
+
+
+def _pybullet_bench(config: FlightBenchConfig) -> dict[str, Any]:
+    start = time.perf_counter()
+    with PyBulletVehicle.create(seed=config.seed) as vehicle:
+        flown = fly_move(vehicle, config.move)
+        sim_s = vehicle.time_s()
+    wall_s = time.perf_counter() - start
+    return {
+        "move_wall_s": flown.move.wall_time_s,
+        "move_right_m": flown.move.displacement.right_m,
+        "flight_wall_s": wall_s,
+        "flight_sim_s": sim_s,
+        "faster_than_real_time": sim_s / wall_s,
+    }
+
+
+def run_flight_bench(config: FlightBenchConfig) -> dict[str, Any]:
+    """Both backends' numbers and whether each target is met."""
+    mavsdk = _mavsdk_bench(config)
+    pybullet = _pybullet_bench(config)
+    measured = {
+        "discovery_to_offboard_s": mavsdk["discovery_to_offboard_s"],
+        "setpoint_rate_hz": mavsdk["setpoint_stream_moving"]["rate_hz"],
+        "command_rtt_p99_ms": mavsdk["command_rtt_ms"]["p99"],
+    }
+    met = {
+        "discovery_to_offboard_s": measured["discovery_to_offboard_s"] <= TARGETS["discovery_to_offboard_s"],
+        "setpoint_rate_hz": measured["setpoint_rate_hz"] >= TARGETS["setpoint_rate_hz"],
+        "command_rtt_p99_ms": measured["command_rtt_p99_ms"] <= TARGETS["command_rtt_p99_ms"],
+    }
+    return {"mavsdk": mavsdk, "pybullet": pybullet, "targets": TARGETS, "target_met": met}
+
+
+def _print_report(report: dict[str, Any]) -> None:
+    m, p, met = report["mavsdk"], report["pybullet"], report["target_met"]
+
+    def ok(name: str) -> str:
+        return "ok" if met[name] else "MISSED"
+
+    marks = ", ".join(f"{k[:-2]} {v:.2f} s" for k, v in m["process_start_to"].items())
+    print("flight benchmark (loopback, dronectl sim-vehicle in a subprocess)")
+    print(f"  from process start: {marks}")
+    print(
+        f"  discovery -> offboard active: {m['discovery_to_offboard_s']:.2f} s "
+        f"(arming wait {m['arming_wait_s']:.2f} s, takeoff climb {m['takeoff_climb_s']:.2f} s)  "
+        f"[target <= 5 s: {ok('discovery_to_offboard_s')}]"
+    )
+    held, moving = m["setpoint_stream_holding"], m["setpoint_stream_moving"]
+    print(
+        f"  setpoints at the vehicle while moving: {moving['rate_hz']:.2f} Hz, largest gap "
+        f"{moving['max_gap_ms']:.0f} ms  [target >= 20 Hz: {ok('setpoint_rate_hz')}]"
+    )
+    print(
+        f"  setpoints while holding (MAVSDK's own re-send only): {held['rate_hz']:.2f} Hz, "
+        f"largest gap {held['max_gap_ms']:.0f} ms"
+    )
+    rtt = m["command_rtt_ms"]
+    print(
+        f"  command round trip: p50 {rtt['p50']:.2f} ms, p99 {rtt['p99']:.2f} ms (n={rtt['n']})  "
+        f"[target p99 <= 50 ms: {ok('command_rtt_p99_ms')}]"
+    )
+    print(
+        f"  one move, MAVSDK backend: {m['move_wall_s']:.2f} s wall, "
+        f"achieved right {m['move_right_m']:+.3f} m"
+    )
+    print(
+        f"  one move, PyBullet backend: {p['move_wall_s']:.3f} s wall, "
+        f"achieved right {p['move_right_m']:+.3f} m (whole flight {p['flight_sim_s']:.1f} s simulated "
+        f"in {p['flight_wall_s']:.2f} s, "
+        f"x{p['faster_than_real_time']:.0f} real time)"
+    )
+
+
+def bench_main(argv: list[str]) -> int:
+    """`dronectl bench flight [--json FILE] [--base-port N]`; returns 0 when every target is met."""
+    parser = argparse.ArgumentParser(prog="dronectl bench flight", description=__doc__.splitlines()[0])
+    parser.add_argument("--json", type=Path, help="also write the numbers to this JSON file")
+    parser.add_argument(
+        "--base-port", type=int, default=14790, help="UDP ports base..base+2 (default %(default)s)"
+    )
+    parser.add_argument("--rtt-samples", type=int, default=200, help="command round trips to time")
+    args = parser.parse_args(argv)
+    report = run_flight_bench(FlightBenchConfig(base_port=args.base_port, rtt_samples=args.rtt_samples))
+    _print_report(report)
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report, indent=2) + "\n")
+        print(f"wrote {args.json}")
+    return 0 if all(report["target_met"].values()) else 1

@@ -1,0 +1,54 @@
+"""`LinkMonitor`: decides when a vehicle has stopped answering.
+
+Two signals, whichever comes first: no telemetry message for `timeout_s`
+(freshness: PX4 streams attitude at ~90 Hz, so silence is unambiguous), or
+MAVSDK's connection state going false (~3 s after the last heartbeat).
+Getters in MAVSDK keep returning stale values after a link dies, and commands
+that are only enqueued (setpoints) still "succeed", so without this check a
+controller would fly blind.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+
+from flight.errors import LinkLostError
+
+
+class LinkMonitor:
+    """Thread-safe: `heard()` and `set_connected()` come from MAVSDK's callback thread."""
+
+    def __init__(self, timeout_s: float, clock: Callable[[], float] = time.monotonic) -> None:
+        if not timeout_s > 0:
+            raise ValueError(f"link timeout must be > 0, got {timeout_s!r}")
+        self.timeout_s = timeout_s
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._last_heard_s = clock()
+        self._connected = True
+
+    def heard(self) -> None:
+        """A message arrived from the vehicle."""
+        now = self._clock()
+        with self._lock:
+            self._last_heard_s = now
+            self._connected = True
+
+    def set_connected(self, connected: bool) -> None:
+        """MAVSDK's connection-state change (reported on changes only)."""
+        with self._lock:
+            self._connected = connected
+
+    def silent_s(self) -> float:
+        with self._lock:
+            return self._clock() - self._last_heard_s
+
+    def check(self, origin: str) -> None:
+        """Raise `LinkLostError` naming `origin` if the vehicle has gone silent."""
+        with self._lock:
+            silent_s = self._clock() - self._last_heard_s
+            connected = self._connected
+        if silent_s > self.timeout_s or not connected:
+            raise LinkLostError(origin, silent_s, self.timeout_s)

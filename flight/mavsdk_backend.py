@@ -1,0 +1,385 @@
+"""`MavsdkVehicle`: the `Vehicle` interface over MAVLink with MAVSDK 4 (the only module importing mavsdk).
+
+Written for real PX4 (SITL or hardware) as much as for `dronectl sim-vehicle`:
+- arming is retried while PX4 refuses it for a few seconds after boot (MAVSDK
+  reports both DENIED and TEMPORARILY_REJECTED as COMMAND_DENIED, so every
+  refusal is retried until the arm deadline, then raised with PX4's last message);
+- every mode change is confirmed from the flight mode in telemetry (PX4 can ack
+  ACCEPTED and then refuse), never from the ack alone;
+- offboard is left for Hold before landing (else PX4 returns to OFFBOARD after
+  disarm and refuses the next arm); a disarm racing PX4's auto-disarm is success.
+- MAVSDK re-sends the last setpoint at 20 Hz by itself: `set_velocity_body` is
+  called only when the command changes or the caller refreshes it, never in a loop.
+- link loss (no telemetry for `link_timeout_s`, or MAVSDK's connection state
+  going false) raises `LinkLostError` from `telemetry()` and so from every wait.
+
+MAVSDK's sync callbacks all run on one MAVSDK thread, and blocking calls return
+through it: the callbacks here only store values under a lock.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from mavsdk import ComponentType, Configuration, ConnectionResult, Mavsdk, log_subscribe
+from mavsdk.logging import LogLevel
+from mavsdk.plugins.action import Action, ActionError, ActionResult
+from mavsdk.plugins.offboard import Offboard, OffboardError, VelocityBodyYawspeed
+from mavsdk.plugins.telemetry import Telemetry as MavsdkTelemetry
+
+from flight.errors import (
+    CommandDeniedError,
+    ModeChangeError,
+    OffboardInterruptedError,
+    VehicleConnectionError,
+)
+from flight.link import LinkMonitor
+from flight.safety import FlightTimeouts
+from flight.types import Attitude, FlightMode, PositionNed, Telemetry, VelocityBody, VelocityNed
+from flight.urls import validate_connection_url
+from flight.vehicle import Vehicle, wait_for
+
+log = logging.getLogger(__name__)
+
+_RETRY_ARM = {ActionResult.COMMAND_DENIED, ActionResult.BUSY, ActionResult.TIMEOUT, ActionResult.FAILED}
+_NAN3 = (math.nan, math.nan, math.nan)
+
+
+@dataclass(frozen=True)
+class MavsdkConfig:
+    """How to reach the vehicle and how long to wait for it."""
+
+    url: str = "udpin://0.0.0.0:14540"
+    timeouts: FlightTimeouts = field(default_factory=FlightTimeouts)
+    link_timeout_s: float = 2.0
+    arm_retry_period_s: float = 0.5
+    altitude_tolerance_m: float = 0.3
+    climb_done_speed_m_s: float = 0.2  # takeoff ends when the climb has (nearly) stopped
+    poll_s: float = 0.02
+
+    def __post_init__(self) -> None:
+        validate_connection_url(self.url)
+        if not (self.link_timeout_s > 0 and self.arm_retry_period_s > 0 and self.poll_s > 0):
+            raise ValueError("MavsdkConfig: link_timeout_s, arm_retry_period_s and poll_s must be > 0")
+
+
+def _route_mavsdk_logs() -> None:
+    """Send the C library's log lines to Python logging instead of coloured stderr."""
+    mavsdk_log = logging.getLogger("mavsdk")
+    levels = {LogLevel.DEBUG: logging.DEBUG, LogLevel.INFO: logging.INFO, LogLevel.WARN: logging.WARNING}
+
+    def forward(level: LogLevel, message: str, _file: str | None, _line: int) -> bool:
+        mavsdk_log.log(levels.get(level, logging.ERROR), "%s", message)
+        return True
+
+    log_subscribe(forward)
+
+
+class MavsdkVehicle(Vehicle):
+    """A PX4-style vehicle reached through MAVSDK at `config.url`."""
+
+    realtime = True
+
+    def __init__(self, config: MavsdkConfig | None = None) -> None:
+        self.config = config or MavsdkConfig()
+        self.setpoints_sent = 0
+        self._lock = threading.Lock()
+        self._position: tuple[float, float, float] = _NAN3
+        self._velocity: tuple[float, float, float] = _NAN3
+        self._attitude: tuple[float, float, float] = _NAN3
+        self._armed = False
+        self._in_air = False
+        self._mode = FlightMode.UNKNOWN
+        self._battery_percent: float | None = None
+        self._local_position_ok = False
+        self._home_ok = False
+        self._texts: deque[str] = deque(maxlen=100)
+        self._link = LinkMonitor(self.config.link_timeout_s)
+        self._mavsdk: Mavsdk | None = None
+        self._system: Any = None
+        self._telemetry: MavsdkTelemetry | None = None
+        self._action: Action | None = None
+        self._offboard: Offboard | None = None
+        self._setpoint_set = False
+        self._in_offboard = False
+        self._ground_down_m = math.nan
+
+    # --- connection ---------------------------------------------------------------------------
+    def connect(self, timeout_s: float | None = None) -> None:
+        if self._mavsdk is not None:
+            return
+        timeout_s = timeout_s or self.config.timeouts.connect_s
+        url = self.config.url
+        _route_mavsdk_logs()
+        self._mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+        result = self._mavsdk.add_any_connection(url)
+        if result != ConnectionResult.SUCCESS:
+            hint = (
+                " (is another program already bound to that port?)"
+                if result == ConnectionResult.BIND_ERROR
+                else ""
+            )
+            self.close()
+            raise VehicleConnectionError("connect()", result.name, f"cannot open {url}{hint}")
+        system = self._mavsdk.first_autopilot(timeout_s)
+        if system is None:
+            self.close()
+            raise VehicleConnectionError(
+                "connect()",
+                "NO_AUTOPILOT",
+                f"no autopilot heartbeat on {url} within {timeout_s:.1f} s: is the vehicle running and "
+                "sending to this address and port? (PX4 SITL and `dronectl sim-vehicle` send to 14540 "
+                "by default)",
+            )
+        self._link = LinkMonitor(self.config.link_timeout_s)
+        # Keep every MAVSDK object referenced for the connection's life: a plugin left to the
+        # garbage collector is destroyed with its subscriptions, and telemetry silently stops.
+        self._system = system
+        self._telemetry = MavsdkTelemetry(system)
+        self._action = Action(system)
+        self._offboard = Offboard(system)
+        self._subscribe(system, self._telemetry)
+        log.info("connected to an autopilot on %s", url)
+
+    def _subscribe(self, system: Any, tel: MavsdkTelemetry) -> None:
+        def store(fn: Callable[[Any], None]) -> Callable[[Any, Any], None]:
+            def callback(data: Any, _user_data: Any) -> None:
+                with self._lock:
+                    fn(data)
+                self._link.heard()
+
+            return callback
+
+        def pos_vel(d: Any) -> None:
+            self._position = (d.position.north_m, d.position.east_m, d.position.down_m)
+            self._velocity = (d.velocity.north_m_s, d.velocity.east_m_s, d.velocity.down_m_s)
+
+        def attitude(d: Any) -> None:
+            self._attitude = (d.roll_deg, d.pitch_deg, d.yaw_deg)
+
+        def health(d: Any) -> None:
+            self._local_position_ok, self._home_ok = d.is_local_position_ok, d.is_home_position_ok
+
+        def battery(d: Any) -> None:
+            self._battery_percent = None if math.isnan(d.remaining_percent) else d.remaining_percent
+
+        tel.subscribe_position_velocity_ned(store(pos_vel))
+        tel.subscribe_attitude_euler(store(attitude))
+        tel.subscribe_armed(store(lambda d: setattr(self, "_armed", bool(d))))
+        tel.subscribe_in_air(store(lambda d: setattr(self, "_in_air", bool(d))))
+        tel.subscribe_flight_mode(
+            store(lambda d: setattr(self, "_mode", FlightMode.__members__.get(d.name, FlightMode.OTHER)))
+        )
+        tel.subscribe_health(store(health))
+        tel.subscribe_battery(store(battery))
+        tel.subscribe_status_text(store(lambda d: self._texts.append(f"{d.type.name}: {d.text}")))
+        system.subscribe_is_connected(lambda connected, _ud: self._link.set_connected(bool(connected)))
+
+    # --- telemetry ----------------------------------------------------------------------------
+    def telemetry(self) -> Telemetry:
+        self._link.check("telemetry()")
+        with self._lock:
+            return Telemetry(
+                position_ned=PositionNed(*self._position),
+                velocity_ned=VelocityNed(*self._velocity),
+                attitude=Attitude(*self._attitude),
+                armed=self._armed,
+                in_air=self._in_air,
+                flight_mode=self._mode,
+                timestamp_s=self.time_s(),
+                battery_remaining_percent=self._battery_percent,
+            )
+
+    def status_texts(self) -> list[str]:
+        with self._lock:
+            return list(self._texts)
+
+    def _last_text(self) -> str:
+        with self._lock:
+            return self._texts[-1] if self._texts else ""
+
+    def time_s(self) -> float:
+        return time.monotonic()
+
+    def sleep(self, seconds: float) -> None:
+        time.sleep(max(0.0, seconds))
+
+    def _wait(
+        self, predicate: Callable[[Telemetry], bool], timeout_s: float, origin: str, what: str
+    ) -> Telemetry:
+        return wait_for(self, predicate, timeout_s, origin, what, poll_s=self.config.poll_s)
+
+    # --- commands -----------------------------------------------------------------------------
+    def wait_ready(self, timeout_s: float | None = None) -> None:
+        def ready(t: Telemetry) -> bool:
+            with self._lock:
+                ok = self._local_position_ok and self._home_ok
+            return ok and math.isfinite(t.position_ned.down_m) and math.isfinite(t.attitude.yaw_deg)
+
+        telemetry = self._wait(
+            ready, timeout_s or self.config.timeouts.ready_s, "wait_ready()", "local position + home"
+        )
+        self._ground_down_m = telemetry.position_ned.down_m
+
+    def arm(self, timeout_s: float | None = None) -> None:
+        timeout_s = timeout_s or self.config.timeouts.arm_s
+        action = self._require(self._action, "arm()")
+        deadline = self.time_s() + timeout_s
+        if self.telemetry().flight_mode == FlightMode.OFFBOARD:
+            # PX4 reverts to the last requested mode after a disarm and refuses to arm in OFFBOARD.
+            log.info("disarmed in OFFBOARD (PX4 reverted to it after the last flight): switching to Hold")
+            self.hold()
+        while True:
+            self._link.check("arm()")
+            try:
+                action.arm()
+                break
+            except ActionError as exc:
+                if exc.result not in _RETRY_ARM or self.time_s() + self.config.arm_retry_period_s > deadline:
+                    raise CommandDeniedError("arm()", exc.result.name, self._last_text()) from None
+                log.info("arming refused (%s; %r): retrying", exc.result.name, self._last_text())
+                self.sleep(self.config.arm_retry_period_s)
+        self._wait(lambda t: t.armed, max(0.5, deadline - self.time_s()), "arm()", "armed state in telemetry")
+        if not math.isfinite(self._ground_down_m):
+            self._ground_down_m = self.telemetry().position_ned.down_m
+
+    def takeoff(self, altitude_m: float, timeout_s: float | None = None) -> None:
+        action = self._require(self._action, "takeoff()")
+        if not (math.isfinite(altitude_m) and altitude_m > 0):
+            raise ValueError(f"takeoff altitude must be a positive number of metres, got {altitude_m!r}")
+        try:
+            action.set_takeoff_altitude(altitude_m)
+            action.takeoff()
+        except ActionError as exc:
+            armed = self.telemetry().armed
+            detail = self._last_text() or ("the vehicle is not armed" if not armed else "")
+            raise CommandDeniedError(exc.origin, exc.result.name, detail) from None
+        target_m = altitude_m - self.config.altitude_tolerance_m
+        self._wait(
+            lambda t: (
+                t.in_air
+                and self._ground_down_m - t.position_ned.down_m >= target_m
+                and abs(t.velocity_ned.down_m_s) < self.config.climb_done_speed_m_s
+            ),
+            timeout_s or self.config.timeouts.takeoff_s,
+            "takeoff()",
+            f"in-air state, altitude {target_m:.2f} m and the climb ending",
+        )
+
+    def set_velocity_body(self, velocity: VelocityBody) -> None:
+        offboard = self._require(self._offboard, "set_velocity_body()")
+        self._check_still_offboard("set_velocity_body()")
+        setpoint = VelocityBodyYawspeed(
+            velocity.forward_m_s, velocity.right_m_s, velocity.down_m_s, velocity.yawspeed_deg_s
+        )
+        try:
+            offboard.set_velocity_body(setpoint)
+        except OffboardError as exc:
+            raise CommandDeniedError("set_velocity_body()", exc.result.name) from None
+        self._setpoint_set = True
+        self.setpoints_sent += 1
+
+    def _check_still_offboard(self, origin: str) -> None:
+        """Report a vehicle that left offboard by itself (PX4's setpoint-loss failsafe, a pilot's switch)."""
+        mode = self.telemetry().flight_mode
+        if self._in_offboard and mode != FlightMode.OFFBOARD:
+            self._in_offboard = False
+            raise OffboardInterruptedError(origin, mode.name, self._last_text())
+
+    def start_offboard(self, timeout_s: float | None = None) -> None:
+        offboard = self._require(self._offboard, "start_offboard()")
+        if not self._setpoint_set:
+            raise CommandDeniedError(
+                "start_offboard()",
+                "NO_SETPOINT_SET",
+                "set a velocity setpoint first: PX4 needs a setpoint stream",
+            )
+        try:
+            offboard.start()
+        except OffboardError as exc:
+            raise CommandDeniedError("start_offboard()", exc.result.name, self._last_text()) from None
+        self._confirm_mode(FlightMode.OFFBOARD, timeout_s, "start_offboard()")
+        self._in_offboard = True
+
+    def hold(self) -> None:
+        if self._in_offboard and self.telemetry().flight_mode == FlightMode.OFFBOARD:
+            self.set_velocity_body(VelocityBody())
+            return
+        self._in_offboard = False
+        action = self._require(self._action, "hold()")
+        try:
+            action.hold()
+        except ActionError as exc:
+            raise CommandDeniedError("hold()", exc.result.name, self._last_text()) from None
+        self._confirm_mode(FlightMode.HOLD, None, "hold()")
+
+    def stop_offboard(self, timeout_s: float | None = None) -> None:
+        offboard = self._require(self._offboard, "stop_offboard()")
+        self._in_offboard = False
+        if self.telemetry().flight_mode != FlightMode.OFFBOARD:
+            return
+        try:
+            offboard.stop()
+        except OffboardError as exc:
+            raise CommandDeniedError("stop_offboard()", exc.result.name, self._last_text()) from None
+        self._confirm_mode(FlightMode.HOLD, timeout_s, "stop_offboard()")
+
+    def land(self, timeout_s: float | None = None) -> None:
+        action = self._require(self._action, "land()")
+        if self.telemetry().flight_mode == FlightMode.OFFBOARD:
+            self.stop_offboard()
+        self._in_offboard = False
+        try:
+            action.land()
+        except ActionError as exc:
+            raise CommandDeniedError("land()", exc.result.name, self._last_text()) from None
+        self._wait(lambda t: not t.in_air, timeout_s or self.config.timeouts.land_s, "land()", "landed state")
+
+    def disarm(self, timeout_s: float | None = None) -> None:
+        action = self._require(self._action, "disarm()")
+        if not self.telemetry().armed:
+            return
+        try:
+            action.disarm()
+        except ActionError as exc:
+            if self.telemetry().armed:  # else PX4's auto-disarm won the race: that is success
+                raise CommandDeniedError("disarm()", exc.result.name, self._last_text()) from None
+        self._wait(
+            lambda t: not t.armed, timeout_s or self.config.timeouts.disarm_s, "disarm()", "disarmed state"
+        )
+
+    def _confirm_mode(self, mode: FlightMode, timeout_s: float | None, origin: str) -> None:
+        timeout_s = timeout_s or self.config.timeouts.mode_change_s
+        deadline = self.time_s() + timeout_s
+        while (observed := self.telemetry().flight_mode) != mode:
+            if self.time_s() >= deadline:
+                raise ModeChangeError(
+                    origin, mode.name, f"{observed.name} ({self._last_text()!r})", timeout_s
+                )
+            self.sleep(self.config.poll_s)
+
+    # --- diagnostics and teardown -------------------------------------------------------------
+    def command_round_trip_s(self) -> float:
+        """Time one harmless command (Hold while already holding) from send to ack: a link benchmark."""
+        action = self._require(self._action, "command_round_trip_s()")
+        start = time.perf_counter()
+        action.hold()
+        return time.perf_counter() - start
+
+    def _require(self, plugin: Any, origin: str) -> Any:
+        if plugin is None:
+            raise CommandDeniedError(origin, "NOT_CONNECTED", "call connect() first")
+        return plugin
+
+    def close(self) -> None:
+        mavsdk, self._mavsdk = self._mavsdk, None
+        self._action = self._offboard = self._telemetry = self._system = None
+        if mavsdk is not None:
+            mavsdk.destroy()

@@ -1,0 +1,94 @@
+"""One discrete move: fly a body velocity for a duration, hold until settled, measure what happened.
+
+The achieved displacement comes from telemetry, never from velocity × time:
+velocity offboard drifts (on real PX4 a 0.5 m/s × 2 s move gave 0.3–0.9 m), so
+a controller re-observes after every move instead of assuming its length.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+
+from flight.types import Displacement, PositionNed, VelocityBody
+from flight.vehicle import Vehicle
+from sim_world.frames import world_ned_to_heading
+
+log = logging.getLogger(__name__)
+
+_CLOCK_SLACK_S = 1e-3
+
+
+@dataclass(frozen=True)
+class MoveResult:
+    """What one move did. Times are on the vehicle's clock except `wall_time_s`."""
+
+    command: VelocityBody
+    duration_s: float
+    start_position_ned: PositionNed
+    end_position_ned: PositionNed
+    displacement: Displacement
+    settled: bool
+    settle_time_s: float
+    wall_time_s: float
+
+
+def execute_move(
+    vehicle: Vehicle,
+    velocity: VelocityBody,
+    duration_s: float,
+    settle_speed_m_s: float = 0.1,
+    settle_timeout_s: float = 5.0,
+    command_period_s: float = 0.1,
+) -> MoveResult:
+    """Command `velocity` for `duration_s` (vehicle clock), then hold until speed < `settle_speed_m_s`.
+
+    The setpoint is refreshed every `command_period_s` (throttled: MAVSDK re-sends
+    the last one at 20 Hz itself; the refresh only keeps a setpoint watchdog fed).
+    Not settling within `settle_timeout_s` is reported in the result (`settled`),
+    not raised: the vehicle is holding either way, and the caller re-observes.
+    Requires the vehicle to be in offboard.
+    """
+    if not (math.isfinite(duration_s) and duration_s >= 0.0):
+        raise ValueError(f"duration_s must be a finite number >= 0, got {duration_s!r}")
+    if not (settle_speed_m_s > 0.0 and settle_timeout_s > 0.0 and command_period_s > 0.0):
+        raise ValueError("settle_speed_m_s, settle_timeout_s and command_period_s must be > 0")
+    wall_start = time.perf_counter()
+    start = vehicle.telemetry()
+    end_time_s = vehicle.time_s() + duration_s
+    vehicle.set_velocity_body(velocity)
+    # A simulated clock advances in whole physics steps: stop within a millisecond of the end.
+    while (remaining_s := end_time_s - vehicle.time_s()) > _CLOCK_SLACK_S:
+        vehicle.sleep(min(command_period_s, remaining_s))
+        if end_time_s - vehicle.time_s() > _CLOCK_SLACK_S:
+            vehicle.set_velocity_body(velocity)
+    vehicle.hold()
+
+    settle_start_s = vehicle.time_s()
+    settled = False
+    while vehicle.time_s() - settle_start_s < settle_timeout_s:
+        vehicle.sleep(command_period_s)
+        if vehicle.telemetry().velocity_ned.speed_m_s < settle_speed_m_s:
+            settled = True
+            break
+    settle_time_s = vehicle.time_s() - settle_start_s
+    if not settled:
+        log.warning("move did not settle below %.2f m/s within %.1f s", settle_speed_m_s, settle_timeout_s)
+
+    end = vehicle.telemetry()
+    delta = end.position_ned - start.position_ned
+    forward_m, right_m = world_ned_to_heading(
+        delta.north_m, delta.east_m, math.radians(start.attitude.yaw_deg)
+    )
+    return MoveResult(
+        command=velocity,
+        duration_s=duration_s,
+        start_position_ned=start.position_ned,
+        end_position_ned=end.position_ned,
+        displacement=Displacement(delta.north_m, delta.east_m, delta.down_m, forward_m, right_m),
+        settled=settled,
+        settle_time_s=settle_time_s,
+        wall_time_s=time.perf_counter() - wall_start,
+    )

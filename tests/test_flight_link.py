@@ -1,0 +1,77 @@
+"""Connection URLs are checked with a fix in the message; link loss is detected by the monitor."""
+
+from __future__ import annotations
+
+import pytest
+
+from flight.errors import ConnectionUrlError, LinkLostError
+from flight.link import LinkMonitor
+from flight.urls import validate_connection_url
+
+
+@pytest.mark.parametrize(
+    "url",
+    [
+        "udpin://0.0.0.0:14540",
+        "udpin://127.0.0.1:14741",
+        "udpout://192.168.1.10:14550",
+        "tcpout://10.0.0.2:5760",
+        "serial:///dev/ttyACM0:57600",
+        "serial://COM3:115200",
+        "udp://:14540",
+    ],
+)
+def test_urls_mavsdk_accepts_pass(url: str) -> None:
+    assert validate_connection_url(url) == url
+
+
+@pytest.mark.parametrize(
+    ("url", "fix"),
+    [
+        ("udpin://localhost:14540", "udpin://127.0.0.1:14540"),
+        ("udpin://:14540", "udpin://0.0.0.0:14540"),
+        ("udpin://0.0.0.0:99999", "1 to 65535"),
+        ("udpin://drone.local:14540", "numeric IP"),
+        ("http://127.0.0.1:14540", "unknown scheme"),
+        ("127.0.0.1:14540", "scheme://address"),
+        ("serial:///dev/ttyACM0:57601", "57600"),
+        ("serial:///dev/ttyACM0", "baud rate"),
+    ],
+)
+def test_bad_urls_get_an_error_naming_the_url_and_the_fix(url: str, fix: str) -> None:
+    with pytest.raises(ConnectionUrlError) as info:
+        validate_connection_url(url)
+    assert repr(url) in str(info.value)
+    assert fix in str(info.value)
+    assert info.value.origin == "connect()"
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.now_s = 100.0
+
+    def __call__(self) -> float:
+        return self.now_s
+
+
+def test_silence_longer_than_the_timeout_is_link_loss() -> None:
+    clock = FakeClock()
+    link = LinkMonitor(2.0, clock)
+    clock.now_s += 1.9
+    link.check("telemetry()")
+    link.heard()
+    clock.now_s += 1.9
+    link.check("telemetry()")
+    clock.now_s += 0.2
+    with pytest.raises(LinkLostError, match=r"telemetry\(\): LINK_LOST") as info:
+        link.check("telemetry()")
+    assert info.value.silent_s == pytest.approx(2.1)
+
+
+def test_mavsdk_disconnect_is_link_loss_until_the_vehicle_is_heard_again() -> None:
+    link = LinkMonitor(2.0, FakeClock())
+    link.set_connected(False)
+    with pytest.raises(LinkLostError):
+        link.check("arm()")
+    link.heard()
+    link.check("arm()")
