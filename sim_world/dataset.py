@@ -22,7 +22,7 @@ from typing import Any, TextIO
 
 logger = logging.getLogger(__name__)
 
-GENERATOR_VERSION = "sim_world.collect/1"
+GENERATOR_VERSION = "sim_world.collect/2"  # 2: floor collision plane no longer drawn over the floor
 DATASET_JSON = "dataset.json"
 MANIFEST = "manifest.jsonl"
 IMAGES_DIR = "images"
