@@ -1,0 +1,79 @@
+"""E_img: a ResNet-18-style image encoder written out by hand (paper appendix, Table 4).
+
+Stem 7×7/2 conv + BN + ReLU + 3×3/2 max-pool, four stages of two basic residual
+blocks with widths w·[1, 2, 4, 8] (w = 64 in the paper), global average pool,
+linear projection to d = 128. Optional coordinate planes (u, v ∈ [-1, 1]) are
+appended to the RGB input when `coord_channels` is on (cpu preset).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+
+class BasicBlock(nn.Module):
+    """Two 3×3 conv + BN layers with an identity (or 1×1 projected) shortcut, ReLU after the sum."""
+
+    def __init__(self, c_in: int, c_out: int, stride: int) -> None:
+        super().__init__()
+        self.conv1 = nn.Conv2d(c_in, c_out, 3, stride=stride, padding=1, bias=False)
+        self.bn1 = nn.BatchNorm2d(c_out)
+        self.conv2 = nn.Conv2d(c_out, c_out, 3, stride=1, padding=1, bias=False)
+        self.bn2 = nn.BatchNorm2d(c_out)
+        self.shortcut: nn.Module = nn.Identity()
+        if stride != 1 or c_in != c_out:
+            self.shortcut = nn.Sequential(
+                nn.Conv2d(c_in, c_out, 1, stride=stride, bias=False), nn.BatchNorm2d(c_out)
+            )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        out = torch.relu(self.bn1(self.conv1(x)))
+        out = self.bn2(self.conv2(out))
+        return torch.relu(out + self.shortcut(x))
+
+
+class ImageEncoder(nn.Module):
+    """(B, 3, S, S) float images in [0, 1] → (B, d) embeddings."""
+
+    MEAN = (0.485, 0.456, 0.406)  # per-channel normalisation constants (ImageNet convention)
+    STD = (0.229, 0.224, 0.225)
+
+    def __init__(self, out_dim: int = 128, base_width: int = 64, coord_channels: bool = False) -> None:
+        super().__init__()
+        self.coord_channels = coord_channels
+        c_in = 5 if coord_channels else 3
+        w = base_width
+        self.stem = nn.Sequential(
+            nn.Conv2d(c_in, w, 7, stride=2, padding=3, bias=False),
+            nn.BatchNorm2d(w),
+            nn.ReLU(inplace=True),
+            nn.MaxPool2d(3, stride=2, padding=1),
+        )
+        widths = (w, 2 * w, 4 * w, 8 * w)
+        stages, c = [], w
+        for i, c_out in enumerate(widths):
+            stride = 1 if i == 0 else 2
+            stages.append(nn.Sequential(BasicBlock(c, c_out, stride), BasicBlock(c_out, c_out, 1)))
+            c = c_out
+        self.stages = nn.Sequential(*stages)
+        self.proj = nn.Linear(c, out_dim)
+        self.register_buffer("mean", torch.tensor(self.MEAN).view(1, 3, 1, 1), persistent=False)
+        self.register_buffer("std", torch.tensor(self.STD).view(1, 3, 1, 1), persistent=False)
+
+    def forward(self, images: torch.Tensor) -> torch.Tensor:
+        x = (images - self.mean) / self.std  # (B, 3, S, S)
+        if self.coord_channels:
+            x = torch.cat([x, _coord_planes(x)], dim=1)  # (B, 5, S, S)
+        x = self.stem(x)  # (B, w, S/4, S/4)
+        x = self.stages(x)  # (B, 8w, S/32, S/32)
+        x = x.mean(dim=(2, 3))  # (B, 8w) global average pool
+        return self.proj(x)  # (B, d)
+
+
+def _coord_planes(x: torch.Tensor) -> torch.Tensor:
+    """(B, 2, H, W): u and v of each pixel centre, scaled to [-1, 1]."""
+    b, _, h, w = x.shape
+    u = torch.linspace(-1.0, 1.0, w, device=x.device, dtype=x.dtype).view(1, 1, 1, w).expand(b, 1, h, w)
+    v = torch.linspace(-1.0, 1.0, h, device=x.device, dtype=x.dtype).view(1, 1, h, 1).expand(b, 1, h, w)
+    return torch.cat([u, v], dim=1)

@@ -1,0 +1,70 @@
+"""Augmentation never changes a label: shear about the centre is checked per sample."""
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from controller.actions import label_from_offset
+from controller.latent.augment import augment, colour_jitter, labels_of, shear, sheared_offsets
+from controller.latent.config import AugmentConfig
+
+
+def _disc(size: int, du: float, dv: float) -> torch.Tensor:
+    img = np.zeros((size, size), np.uint8)
+    cv2.circle(img, (round(size / 2 + du), round(size / 2 + dv)), 4, 255, -1)
+    return torch.from_numpy(img).float().div(255).expand(3, -1, -1).clone()
+
+
+def _centroid_offset(img: torch.Tensor) -> tuple[float, float]:
+    w = img[0].numpy()
+    ys, xs = np.mgrid[0 : w.shape[0], 0 : w.shape[1]]
+    s = w.sum()
+    return float((xs * w).sum() / s + 0.5 - w.shape[1] / 2), float((ys * w).sum() / s + 0.5 - w.shape[0] / 2)
+
+
+def test_vectorised_labels_match_the_rule() -> None:
+    offsets = torch.tensor([[0.0, 0.0], [10.5, -10.5], [-30.0, 9.9], [10.0, 10.0], [-10.01, 50.0]])
+    expected = [label_from_offset(float(u), float(v), 10.0).index for u, v in offsets]
+    assert labels_of(offsets, 10.0).tolist() == expected
+
+
+def test_sheared_offsets_predict_where_the_target_moves() -> None:
+    size = 96
+    offsets = torch.tensor([[20.0, -30.0], [-25.0, 25.0]])
+    images = torch.stack([_disc(size, *o.tolist()) for o in offsets])
+    a = torch.tensor([[[1.0, 0.08], [0.0, 1.0]], [[1.0, 0.0], [-0.08, 1.0]]])
+    theta = torch.cat([a, torch.zeros(2, 2, 1)], dim=2)
+    grid = torch.nn.functional.affine_grid(theta, list(images.shape), align_corners=False)
+    out = torch.nn.functional.grid_sample(images, grid, align_corners=False)
+    predicted = sheared_offsets(offsets, a, (size, size))
+    for img, want in zip(out, predicted, strict=True):
+        got = _centroid_offset(img)
+        assert got == pytest.approx(want.tolist(), abs=0.6)
+    assert abs(float(predicted[0, 0]) - 20.0) > 1.5  # the shear really moved the target
+
+
+def test_shear_keeps_every_label_even_near_the_boundary() -> None:
+    size, eps = 96, 4.3
+    gen = torch.Generator().manual_seed(0)
+    drawn = [[eps + 0.5, 30.0], [-(eps - 0.5), -30.0], [25.0, eps - 0.5], [30.0, 30.0]] * 8
+    images = torch.stack([_disc(size, u, v) for u, v in drawn])
+    offsets = torch.tensor([_centroid_offset(i) for i in images])  # where the discs really are
+    out = shear(images, offsets, (size, size), eps, shear_deg=5.0, gen=gen)
+    after = torch.tensor([_centroid_offset(i) for i in out])
+    assert torch.equal(labels_of(offsets, eps), labels_of(after, eps))
+    assert float((after - offsets).abs().max()) > 1.0  # far-off targets were really sheared
+
+
+def test_colour_jitter_stays_in_range_and_changes_pixels() -> None:
+    gen = torch.Generator().manual_seed(1)
+    x = torch.rand(4, 3, 16, 16)
+    y = colour_jitter(x.clone(), AugmentConfig(), gen)
+    assert y.shape == x.shape and float(y.min()) >= 0.0 and float(y.max()) <= 1.0
+    assert float((y - x).abs().mean()) > 0.01
+
+
+def test_disabled_augmentation_is_identity() -> None:
+    x = torch.rand(2, 3, 8, 8)
+    out = augment(x, torch.zeros(2, 2), (8, 8), 1.0, AugmentConfig(enabled=False), torch.Generator())
+    assert out is x

@@ -1,0 +1,91 @@
+"""LatentPlanner: argmin of its own distances, batch = single, bad images and instructions."""
+
+import numpy as np
+import pytest
+import torch
+
+from controller.actions import Action
+from controller.latent.checkpoint import save_checkpoint
+from controller.latent.config import ModelConfig
+from controller.latent.errors import ImageInputError, InstructionError
+from controller.latent.instructions import tokenizer_corpus
+from controller.latent.model import LatentDynamicsModel
+from controller.latent.planner import LatentPlanner
+from controller.latent.tokenizer import InstructionTokenizer
+
+
+@pytest.fixture(scope="module")
+def planner(tmp_path_factory: pytest.TempPathFactory) -> LatentPlanner:
+    torch.manual_seed(3)
+    folder = tmp_path_factory.mktemp("ckpt")
+    tok = InstructionTokenizer.train(tokenizer_corpus())
+    model = LatentDynamicsModel(ModelConfig(image_size=40, base_width=8, vocab_size=tok.vocab_size))
+    save_checkpoint(folder, model, tok, torch.randn(128))
+    return LatentPlanner(folder, threads=1)
+
+
+def _images(n: int, size: int = 40) -> list[np.ndarray]:
+    rng = np.random.default_rng(0)
+    return [rng.integers(0, 256, size=(size, size, 3), dtype=np.uint8) for _ in range(n)]
+
+
+def test_plan_picks_the_argmin_of_its_distances(planner: LatentPlanner) -> None:
+    picked = set()
+    for img in _images(12):
+        action, distances = planner.plan(img, "center the gauge")
+        assert isinstance(action, Action)
+        assert distances.shape == (9,) and distances.dtype == np.float32
+        assert action.index == int(np.argmin(distances))
+        picked.add(action.index)
+    assert len(picked) >= 1
+
+
+def test_distances_match_the_model_directly(planner: LatentPlanner) -> None:
+    img = _images(1)[0]
+    _, distances = planner.plan(img, "please center the valve.")
+    x = torch.from_numpy(img).permute(2, 0, 1).unsqueeze(0).float() / 255
+    with torch.inference_mode():
+        direct = planner.model(
+            x, planner.tokenizer.batch(["please center the valve."]), planner._goal_image[0]
+        )
+    np.testing.assert_allclose(distances, direct[0].numpy(), rtol=1e-5, atol=1e-6)
+
+
+def test_batch_equals_single_calls(planner: LatentPlanner) -> None:
+    images = _images(4)
+    actions, batch = planner.plan_batch(images, "center the gauge")
+    for img, action, row in zip(images, actions, batch, strict=True):
+        single_action, single = planner.plan(img, "center the gauge")
+        assert single_action == action
+        np.testing.assert_allclose(single, row, rtol=1e-4, atol=1e-5)
+
+
+def test_other_image_sizes_are_resized(planner: LatentPlanner) -> None:
+    big = np.kron(_images(1)[0], np.ones((2, 2, 1), dtype=np.uint8))  # 80×80, same content
+    _, d_big = planner.plan(big, "center the gauge")
+    _, d_small = planner.plan(_images(1)[0], "center the gauge")
+    np.testing.assert_allclose(d_big, d_small, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize(
+    ("image", "message"),
+    [
+        (np.zeros((40, 40), np.uint8), "shape"),
+        (np.zeros((40, 40, 4), np.uint8), "shape"),
+        (np.zeros((40, 40, 3), np.float32), "uint8"),
+        (np.zeros((4, 4, 3), np.uint8), "too small"),
+        ([[0]], "numpy array"),
+    ],
+)
+def test_bad_images_are_rejected(planner: LatentPlanner, image: object, message: str) -> None:
+    with pytest.raises(ImageInputError, match=message):
+        planner.plan(image, "center the gauge")  # type: ignore[arg-type]
+
+
+def test_empty_instruction_rejected_and_long_one_truncated(planner: LatentPlanner) -> None:
+    img = _images(1)[0]
+    with pytest.raises(InstructionError, match="empty"):
+        planner.plan(img, "  ")
+    long_text = "center the gauge " + "and keep it steady " * 30
+    action, distances = planner.plan(img, long_text)
+    assert np.isfinite(distances).all() and action.index == int(np.argmin(distances))

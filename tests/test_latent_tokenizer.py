@@ -1,0 +1,54 @@
+"""Instruction corpora and the WordPiece tokenizer: truncation, empty input, save/load."""
+
+from pathlib import Path
+
+import pytest
+
+from controller.latent.errors import InstructionError
+from controller.latent.instructions import builtin_templates, fill, tokenizer_corpus
+from controller.latent.tokenizer import InstructionTokenizer
+
+
+@pytest.fixture(scope="module")
+def tokenizer() -> InstructionTokenizer:
+    return InstructionTokenizer.train(tokenizer_corpus(), vocab_size=5000, max_tokens=50)
+
+
+def test_corpora_sizes_and_held_out_disjoint() -> None:
+    train, held = builtin_templates("train"), builtin_templates("heldout")
+    assert len(builtin_templates("fixed")) == 1
+    assert len(train) == 30 and len(set(train)) == 30
+    assert len(held) >= 30
+    assert not {t.lower() for t in train} & {t.lower() for t in held}
+    assert all("{target}" in t for t in train + held)
+    assert fill(train[0], "switchbox") == "Center the switch box in the image."
+
+
+def test_lower_cased_wordpiece_with_cls_sep(tokenizer: InstructionTokenizer) -> None:
+    assert tokenizer.tokens("Center the GAUGE.") == ["[CLS]", "center", "the", "gauge", ".", "[SEP]"]
+    assert tokenizer.vocab_size < 5000
+
+
+def test_held_out_words_become_known_pieces_not_unk(tokenizer: InstructionTokenizer) -> None:
+    for template in builtin_templates("heldout"):
+        assert "[UNK]" not in tokenizer.tokens(fill(template, "valve")), template
+
+
+def test_overlong_instruction_truncated_to_50_tokens(tokenizer: InstructionTokenizer) -> None:
+    ids = tokenizer.ids("center the gauge " * 40)
+    assert len(ids) == 50
+    assert tokenizer.batch(["center the gauge " * 40, "center"]).shape == (2, 50)
+
+
+@pytest.mark.parametrize("text", ["", "   ", "\n\t"])
+def test_empty_instruction_rejected(tokenizer: InstructionTokenizer, text: str) -> None:
+    with pytest.raises(InstructionError, match="instruction is empty"):
+        tokenizer.ids(text)
+
+
+def test_save_and_load_give_the_same_ids(tokenizer: InstructionTokenizer, tmp_path: Path) -> None:
+    tokenizer.save(tmp_path)
+    loaded = InstructionTokenizer.load(tmp_path)
+    text = fill(builtin_templates("heldout")[3], "gauge")
+    assert loaded.ids(text) == tokenizer.ids(text)
+    assert loaded.vocab_size == tokenizer.vocab_size

@@ -1,0 +1,61 @@
+"""`dronectl evaluate`: rank-1, per-axis accuracy and confusion matrix of a trained planner."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from controller.actions import ALL_ACTIONS
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="dronectl evaluate", description=__doc__)
+    p.add_argument("--model", type=Path, required=True, help="checkpoint folder written by `dronectl train`")
+    p.add_argument("--data", type=Path, required=True, help="dataset folder")
+    p.add_argument(
+        "--instructions",
+        default="train",
+        help="train (training-style), heldout (never-seen paraphrases) or a text FILE (one per line)",
+    )
+    p.add_argument(
+        "--split", default="test", choices=("test", "train", "goal"), help="dataset split to score"
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the image/instruction pairing")
+    p.add_argument("--epsilon-px", type=float, default=None, help="ε in dataset pixels (default 10 at 224)")
+    p.add_argument(
+        "--latency", type=int, default=0, metavar="N", help="also time N planner decisions on the test images"
+    )
+    p.add_argument("--threads", type=int, default=1, help="torch threads for the latency measurement")
+    p.add_argument("--json", type=Path, default=None, help="also write the full result as JSON here")
+    return p
+
+
+def main(argv: list[str]) -> int:
+    args = build_parser().parse_args(argv)
+    from controller.latent.evaluate import evaluate_checkpoint
+
+    result = evaluate_checkpoint(
+        args.model, args.data, args.instructions, args.split, args.epsilon_px, args.seed
+    )
+    print(f"images: {result.n}   instructions: {result.instructions}")
+    print(f"rank-1 accuracy: {100 * result.rank1:.2f}%")
+    print(f"X accuracy: {100 * result.x_accuracy:.2f}%   Z accuracy: {100 * result.z_accuracy:.2f}%")
+    names = [a.name for a in ALL_ACTIONS]
+    print("confusion (rows: true, columns: predicted)")
+    print(" " * 12 + " ".join(f"{n:>11}" for n in names))
+    for name, row in zip(names, result.confusion, strict=True):
+        print(f"{name:>11} " + " ".join(f"{v:>11}" for v in row))
+    if args.latency > 0:
+        from controller.latent.bench import latency_on_dataset
+
+        lat = latency_on_dataset(args.model, args.data, args.split, args.latency, args.threads)
+        print(
+            f"planner latency over {lat.decisions} decisions ({args.threads} threads): "
+            f"mean {lat.mean_ms:.2f} ms, p50 {lat.p50_ms:.2f} ms, p99 {lat.p99_ms:.2f} ms, "
+            f"max {lat.max_ms:.2f} ms"
+        )
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result.__dict__, indent=1) + "\n")
+    return 0

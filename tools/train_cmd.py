@@ -1,0 +1,95 @@
+"""`dronectl train`: train the latent dynamics planner on a collected dataset folder."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from controller.latent.config import DISTANCES, PRESET_NOTES, PRESETS, AugmentConfig, LossWeights, run_configs
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="dronectl train", description=__doc__)
+    p.add_argument("--data", type=Path, required=True, help="dataset folder written by `dronectl collect`")
+    p.add_argument(
+        "--out", type=Path, required=True, help="run folder for the checkpoint, metrics and curves"
+    )
+    p.add_argument(
+        "--preset",
+        choices=sorted(PRESETS),
+        default="cpu",
+        help="; ".join(f"{k}: {v}" for k, v in PRESET_NOTES.items()),
+    )
+    p.add_argument("--distance", choices=DISTANCES, default=None, help="D: cosine (default), euclidean, both")
+    p.add_argument("--instructions", choices=("fixed", "varied"), default=None, help="default varied")
+    p.add_argument("--seed", type=int, default=None)
+    p.add_argument(
+        "--loss-weights", type=LossWeights.parse, default=None, metavar="dir=1,rank=1,cons=1,reg=1"
+    )
+    p.add_argument("--epochs", type=int, default=None, help="default 50")
+    p.add_argument("--threads", type=int, default=None, help="torch threads (default 2)")
+    p.add_argument("--image-size", type=int, default=None, help="override the preset's input size")
+    p.add_argument("--width", type=int, default=None, help="override the preset's CNN base width")
+    p.add_argument(
+        "--coord-channels", choices=("on", "off"), default=None, help="override (u, v) input planes"
+    )
+    p.add_argument(
+        "--lr-schedule", choices=("constant", "cosine"), default=None, help="override the preset's"
+    )
+    p.add_argument("--lr", type=float, default=None, help="Adam learning rate (default 3e-4)")
+    p.add_argument("--temperature", type=float, default=None, help="τ of the ranking loss (default 1.0)")
+    p.add_argument("--no-augment", action="store_true", help="turn augmentation off")
+    p.add_argument("--epsilon-px", type=float, default=None, help="ε in dataset pixels (default 10 at 224)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def main(argv: list[str]) -> int:
+    args = build_parser().parse_args(argv)
+    model_over = {
+        k: v
+        for k, v in (
+            ("image_size", args.image_size),
+            ("base_width", args.width),
+            ("coord_channels", None if args.coord_channels is None else args.coord_channels == "on"),
+        )
+        if v is not None
+    }
+    train_over: dict[str, object] = {}
+    if args.lr_schedule:
+        train_over["lr_schedule"] = args.lr_schedule
+    if args.lr is not None:
+        train_over["learning_rate"] = args.lr
+    if args.temperature is not None:
+        train_over["temperature"] = args.temperature
+    if args.no_augment:
+        train_over["augment"] = AugmentConfig(enabled=False)
+    if args.epsilon_px is not None:
+        train_over["epsilon_px"] = args.epsilon_px
+    run = run_configs(
+        args.preset,
+        distance=args.distance,
+        instructions=args.instructions,
+        seed=args.seed,
+        weights=args.loss_weights,
+        epochs=args.epochs,
+        threads=args.threads,
+        model_overrides=model_over,
+        train_overrides=train_over,
+    )
+    from controller.latent.train import train  # torch is imported only once arguments are valid
+
+    result = train(args.data, args.out, run.model, run.train, progress=not args.quiet)
+    print(
+        json.dumps(
+            {
+                "out": str(result.out_dir),
+                "best_val_accuracy": round(result.best_val_accuracy, 4),
+                "best_epoch": result.best_epoch,
+                "seconds": round(result.seconds, 1),
+                "images_per_s": round(result.images_per_s, 1),
+            }
+        )
+    )
+    return 0
