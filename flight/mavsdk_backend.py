@@ -101,6 +101,8 @@ class MavsdkVehicle(Vehicle):
         self._local_position_ok = False
         self._home_ok = False
         self._texts: deque[str] = deque(maxlen=100)
+        self._texts_received = 0  # all STATUSTEXTs so far (the deque keeps the latest only)
+        self._texts_at_offboard = 0  # the count when offboard was confirmed
         self._link = LinkMonitor(self.config.link_timeout_s)
         self._mavsdk: Mavsdk | None = None
         self._system: Any = None
@@ -179,7 +181,12 @@ class MavsdkVehicle(Vehicle):
         )
         tel.subscribe_health(store(health))
         tel.subscribe_battery(store(battery))
-        tel.subscribe_status_text(store(lambda d: self._texts.append(f"{d.type.name}: {d.text}")))
+
+        def status_text(d: Any) -> None:
+            self._texts.append(f"{d.type.name}: {d.text}")
+            self._texts_received += 1
+
+        tel.subscribe_status_text(store(status_text))
         system.subscribe_is_connected(lambda connected, _ud: self._link.set_connected(bool(connected)))
 
     # --- telemetry ----------------------------------------------------------------------------
@@ -204,6 +211,14 @@ class MavsdkVehicle(Vehicle):
     def _last_text(self) -> str:
         with self._lock:
             return self._texts[-1] if self._texts else ""
+
+    def _texts_since_offboard(self) -> str:
+        """What the vehicle said since offboard began ("; "-joined): a failsafe sends several texts,
+        and the one naming the cause ("No offboard signal") need not be the last by the time the
+        heartbeat shows the mode change."""
+        with self._lock:
+            new = min(self._texts_received - self._texts_at_offboard, len(self._texts))
+            return "; ".join(list(self._texts)[len(self._texts) - new :]) if new > 0 else ""
 
     def time_s(self) -> float:
         return time.monotonic()
@@ -291,7 +306,9 @@ class MavsdkVehicle(Vehicle):
         mode = self.telemetry().flight_mode
         if self._in_offboard and mode != FlightMode.OFFBOARD:
             self._in_offboard = False
-            raise OffboardInterruptedError(origin, mode.name, self._last_text())
+            raise OffboardInterruptedError(
+                origin, mode.name, self._texts_since_offboard() or self._last_text()
+            )
 
     def start_offboard(self, timeout_s: float | None = None) -> None:
         offboard = self._require(self._offboard, "start_offboard()")
@@ -306,6 +323,8 @@ class MavsdkVehicle(Vehicle):
         except OffboardError as exc:
             raise CommandDeniedError("start_offboard()", exc.result.name, self._last_text()) from None
         self._confirm_mode(FlightMode.OFFBOARD, timeout_s, "start_offboard()")
+        with self._lock:
+            self._texts_at_offboard = self._texts_received
         self._in_offboard = True
 
     def hold(self) -> None:

@@ -9,6 +9,11 @@ Modes follow PX4's behaviour as a MAVLink client sees it:
 - HOLD: hold the position (and heading) locked when the mode was entered.
 - VELOCITY: track velocity setpoints, body (yaw-only frame, as MAVLink
   ``MAV_FRAME_BODY_NED``) or NED, plus a yaw rate (PX4 offboard velocity control).
+  Accepted armed on the ground too, as PX4 accepts OFFBOARD there: the vehicle stays
+  landed at idle until a setpoint climbs faster than ``takeoff_trigger_speed_m_s``,
+  then lifts off with its climb ramped up at ``takeoff_acc_m_s2`` (horizontal
+  setpoints wait until it has left the ground); descending onto the ground, the land
+  detector sets it landed again (still VELOCITY, at idle).
 - LAND: descend at the land speed over the entry point; on touchdown → IDLE.
   Disarming after landing is the vehicle layer's decision.
 
@@ -56,6 +61,7 @@ class AutopilotMode(enum.Enum):
 
 
 _FLYING = (AutopilotMode.TAKEOFF, AutopilotMode.HOLD, AutopilotMode.VELOCITY, AutopilotMode.LAND)
+_GROUND_CLEARANCE_M = 0.05  # this far above where it stood, the vehicle has left the ground
 
 
 def _finite(*values: float) -> bool:
@@ -89,6 +95,8 @@ class Autopilot:
         self._vel_sp: Vec3 = (0.0, 0.0, 0.0)  # what the velocity loop tracked last, ENU
         self._touchdown_s = 0.0  # how long the land detector has seen the ground
         self._landed = True
+        self._lifting = False  # VELOCITY: climbing off the ground on the liftoff ramp (_ramp_v)
+        self._ground_z = 0.0  # VELOCITY: the height it stood at when the liftoff began
 
     # ------------------------------------------------------------------ status
     @property
@@ -134,6 +142,7 @@ class Autopilot:
             raise AutopilotError(f"disarm: refused in flight (mode {self._mode.value}); land first or force")
         self._mode = AutopilotMode.DISARMED
         self._touchdown_s = 0.0
+        self._lifting = False
         self._reset_loops()
 
     def takeoff(self, altitude_m: float) -> None:
@@ -150,12 +159,18 @@ class Autopilot:
         self._enter(AutopilotMode.TAKEOFF)
 
     def hold(self) -> None:
-        """Hold the current position and heading. Refused on the ground."""
+        """Hold the current position and heading. Refused on the ground, except that VELOCITY
+        on the ground (offboard left before lifting off) goes back to IDLE: it stays where it is."""
+        if self._velocity_on_ground():
+            self._to_idle()
+            return
         self._require_flying("hold")
         self._enter(AutopilotMode.HOLD)
 
     def land(self) -> None:
-        """Descend over the current position and settle on the ground; accepted (no-op) when landed."""
+        """Descend over the current position and settle on the ground; when landed: IDLE (or no-op)."""
+        if self._velocity_on_ground():
+            self._to_idle()
         if self._mode not in _FLYING:
             return
         self._enter(AutopilotMode.LAND)
@@ -185,6 +200,7 @@ class Autopilot:
         self._reset_loops()
         self._mode = AutopilotMode.HOLD
         self._landed = False
+        self._lifting = False
         self._lock_entry_setpoints()
 
     # ------------------------------------------------------------------ the loop
@@ -211,11 +227,22 @@ class Autopilot:
         integrate_rates = True
         if mode is AutopilotMode.VELOCITY:
             vel_sp = self._velocity_command_enu(yaw)
-            yawspeed = self._yawspeed_enu
-            self._yaw_sp = wrap_rad(self._yaw_sp + yawspeed * dt_s)
+            if self._landed or self._lifting:
+                liftoff = self._liftoff_setpoint(vel_sp, pos, dt_s)
+                if liftoff is None:  # on the ground, not asked to climb: rotors at idle
+                    self._yaw_sp = yaw
+                    self._reset_loops()
+                    return [self._idle_speed] * 4
+                vel_sp, acc_ff_up = liftoff
+                integrate_rates = not self._landed
+            if not self._landed:
+                yawspeed = self._yawspeed_enu
+                self._yaw_sp = wrap_rad(self._yaw_sp + yawspeed * dt_s)
         elif mode is AutopilotMode.TAKEOFF:
             vel_sp, acc_ff_up = self._takeoff_setpoint(pos, dt_s)
-            integrate_rates = pos[2] > self._home_z() + 0.05  # no rate integration while on the ground
+            integrate_rates = (
+                pos[2] > self._home_z() + _GROUND_CLEARANCE_M
+            )  # no rate integration while on the ground
             if self._ramp_z == self._target[2] and abs(pos[2] - self._target[2]) < prm.takeoff_acceptance_m:
                 self._mode = AutopilotMode.HOLD  # hold at the takeoff point, as PX4's loiter does
         elif mode is AutopilotMode.LAND:
@@ -241,7 +268,7 @@ class Autopilot:
         body_z = (2.0 * (x * z + w * y), 2.0 * (y * z - w * x), body_z_up)
         thrust_acc = max(acc[0] * body_z[0] + acc[1] * body_z[1] + acc[2] * body_z[2], 0.0)
         thrust_n = self.quad_params.mass_kg * thrust_acc
-        if mode is AutopilotMode.LAND:
+        if mode is AutopilotMode.LAND or (mode is AutopilotMode.VELOCITY and not self._lifting):
             self._detect_touchdown(vel, thrust_n, dt_s)
         return self._mixer.mix(thrust_n, torque)
 
@@ -251,10 +278,22 @@ class Autopilot:
             state = "disarmed" if not self.armed else "landed"
             raise AutopilotError(f"{command}: refused while {state}; take off first")
 
+    def _velocity_on_ground(self) -> bool:
+        return self._mode is AutopilotMode.VELOCITY and self._landed
+
+    def _to_idle(self) -> None:
+        """Armed on the ground at idle (from VELOCITY before liftoff or after a touchdown)."""
+        logger.debug("mode %s -> idle (on the ground)", self._mode.value)
+        self._mode = AutopilotMode.IDLE
+        self._lifting = False
+        self._touchdown_s = 0.0
+        self._reset_loops()
+
     def _set_velocity(
         self, command: str, vel: tuple[float, float, float], body: bool, yawspeed_deg_s: float
     ) -> None:
-        self._require_flying(command)
+        if not self.armed:
+            raise AutopilotError(f"{command}: refused while disarmed; arm first")
         if not _finite(*vel, yawspeed_deg_s):
             raise AutopilotError(f"{command}: setpoints must be finite numbers, got {(*vel, yawspeed_deg_s)}")
         prm = self.params
@@ -276,6 +315,37 @@ class Autopilot:
             a, b = heading_to_world_ned(a, b, yaw_enu_to_ned_rad(yaw_enu))
         east, north, up = ned_to_enu((a, b, down)).tolist()
         return (east, north, up)
+
+    def _liftoff_setpoint(self, vel_sp: Vec3, pos: Vec3, dt_s: float) -> tuple[Vec3, float] | None:
+        """VELOCITY from the ground: None while it should stay landed, else the ramped climb.
+
+        The climb setpoint rises at takeoff_acc_m_s2 up to the commanded climb (a smooth
+        spool-up, as PX4's takeoff ramp); horizontal setpoints wait until it is off the ground.
+        Returns the velocity setpoint (ENU) and the ramp's acceleration as a feedforward.
+        """
+        prm = self.params
+        climb = vel_sp[2]
+        if not self._lifting:
+            if climb <= prm.takeoff_trigger_speed_m_s:
+                return None
+            logger.debug("liftoff: climb setpoint %.2f m/s", climb)
+            self._lifting = True
+            self._ramp_v = 0.0
+            self._ground_z = pos[2]
+        elif self._landed and climb <= 0.0:  # asked down again before it left the ground
+            self._lifting = False
+            return None
+        if self._landed and pos[2] > self._ground_z + _GROUND_CLEARANCE_M:
+            logger.debug("liftoff: off the ground")
+            self._landed = False
+        previous_v = self._ramp_v
+        self._ramp_v = min(self._ramp_v + prm.takeoff_acc_m_s2 * dt_s, max(climb, 0.0))
+        if not self._landed and self._ramp_v >= climb:
+            self._lifting = False  # the ramp has reached the setpoint: plain velocity control from here
+        acc_ff_up = min(max((self._ramp_v - previous_v) / dt_s, 0.0), prm.takeoff_acc_m_s2)
+        if self._landed:
+            return (0.0, 0.0, self._ramp_v), acc_ff_up
+        return (vel_sp[0], vel_sp[1], self._ramp_v), acc_ff_up
 
     def _takeoff_setpoint(self, pos: Vec3, dt_s: float) -> tuple[Vec3, float]:
         """Advance the altitude setpoint along a trapezoidal climb profile.
@@ -318,6 +388,7 @@ class Autopilot:
             self._reset_loops()
         self._mode = mode
         self._touchdown_s = 0.0
+        self._lifting = False
         self._lock_entry_setpoints()
 
     def _lock_entry_setpoints(self) -> None:
@@ -338,7 +409,8 @@ class Autopilot:
     def _detect_touchdown(self, vel: Vec3, thrust_n: float, dt_s: float) -> None:
         """PX4-style land detector: no vertical motion while commanding well under hover thrust.
 
-        On touchdown an armed vehicle goes to IDLE; a disarmed one just reports landed.
+        On touchdown an armed vehicle goes to IDLE (in VELOCITY it stays in VELOCITY, at idle,
+        as PX4 stays in OFFBOARD); a disarmed one just reports landed.
         """
         weight = self.quad_params.mass_kg * GRAVITY_M_S2
         if abs(vel[2]) < 0.1 and thrust_n < 0.9 * weight:
@@ -349,8 +421,9 @@ class Autopilot:
             logger.debug("touchdown detected")
             self._landed = True
             self._touchdown_s = 0.0
-            if self.armed:
-                self._mode = AutopilotMode.IDLE
+            if self._mode is not AutopilotMode.DISARMED:
+                if self._mode is not AutopilotMode.VELOCITY:
+                    self._mode = AutopilotMode.IDLE
                 self._reset_loops()
 
     def _reset_loops(self) -> None:

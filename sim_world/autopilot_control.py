@@ -83,10 +83,14 @@ class AutopilotParams:
     """Bound on each rate integrator's angular acceleration."""
     idle_rotor_fraction: float = 0.15
     """Armed rotor speed as a fraction of the maximum (spinning, not lifting)."""
-    takeoff_speed_m_s: float = 1.0
-    """Climb rate during takeoff [MPC_TKO_SPEED]."""
-    takeoff_acc_m_s2: float = 1.0
-    """Acceleration of the takeoff climb profile (speeding up at the start, slowing down at the top)."""
+    takeoff_speed_m_s: float = 1.5
+    """Climb rate during takeoff [MPC_TKO_SPEED, PX4's default 1.5 m/s]."""
+    takeoff_acc_m_s2: float = 2.0
+    """Acceleration of the takeoff climb profile (speeding up at the start, slowing down at the top),
+    and of the climb ramp when a velocity setpoint lifts the vehicle off (below MPC_ACC_UP_MAX, 4 m/s²)."""
+    takeoff_trigger_speed_m_s: float = 0.3
+    """A landed vehicle in VELOCITY mode lifts off when the setpoint climbs faster than this
+    (PX4's velocity-triggered takeoff in FlightTask::_checkTakeoff)."""
     takeoff_acceptance_m: float = 0.1
     """Takeoff ends (→ HOLD) when the altitude is within this of the target."""
     max_takeoff_altitude_m: float = 50.0

@@ -2,8 +2,9 @@
 
 `FakeVehicleModel` implements `sim_world.mavlink.model.VehicleModel` with a point
 mass whose velocity follows its setpoint with a first-order lag; its modes and
-refusals mirror `sim_world.autopilot.Autopilot` (hold/velocity refused on the ground,
-takeoff refused while disarmed, disarm refused in the air unless forced).
+refusals mirror `sim_world.autopilot.Autopilot` (hold refused idle on the ground,
+velocity accepted armed on the ground but flown only once it climbs, takeoff refused
+while disarmed, disarm refused in the air unless forced).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ class FakeVehicleModel:
     CLIMB_M_S = 1.0
     LAND_M_S = 0.7
     TAU_S = 0.15
+    LIFTOFF_CLIMB_M_S = 0.3  # as AutopilotParams.takeoff_trigger_speed_m_s
 
     def __init__(self, physics_hz: float = 100.0):
         self._hz = physics_hz
@@ -60,6 +62,9 @@ class FakeVehicleModel:
         elif self.phase == "velocity":
             v, body, yawspeed = self._command
             desired = v.copy()
+            if self._velocity_on_ground() and desired[2] > -self.LIFTOFF_CLIMB_M_S:
+                self.velocity[:] = 0.0  # stays landed at idle until the setpoint climbs
+                return
             if body:
                 desired[0], desired[1] = heading_to_world_ned(v[0], v[1], self.yaw_rad)
             self.yaw_rad += math.radians(yawspeed) * dt
@@ -81,10 +86,13 @@ class FakeVehicleModel:
             self._t, self.position.copy(), self.velocity.copy(), 0.0, 0.0, self.yaw_rad, np.zeros(3)
         )
 
+    def _velocity_on_ground(self) -> bool:
+        return self.phase == "velocity" and self.position[2] >= 0.0
+
     def status(self) -> AutopilotStatus:
         return AutopilotStatus(
             armed=self.phase != "disarmed",
-            landed=self.phase in ("disarmed", "idle"),
+            landed=self.phase in ("disarmed", "idle") or self._velocity_on_ground(),
             taking_off=self.phase == "takeoff",
             landing=self.phase == "land",
         )
@@ -92,6 +100,10 @@ class FakeVehicleModel:
     def _flying(self, what: str) -> None:
         if self.phase in ("disarmed", "idle"):
             raise ModelRefused(f"{what}: refused on the ground")
+
+    def _armed(self, what: str) -> None:
+        if self.phase == "disarmed":
+            raise ModelRefused(f"{what}: refused while disarmed")
 
     def arm(self) -> None:
         self.calls.append(("arm",))
@@ -113,20 +125,25 @@ class FakeVehicleModel:
 
     def hold(self) -> None:
         self.calls.append(("hold",))
+        if self._velocity_on_ground():
+            self.phase = "idle"
+            return
         self._flying("hold")
         self._target = self.position.copy()
         self.phase = "hold"
 
     def land(self) -> None:
         self.calls.append(("land",))
-        if not self.status().landed:
+        if self._velocity_on_ground():
+            self.phase = "idle"
+        elif not self.status().landed:
             self.phase = "land"
 
     def set_velocity_body(
         self, forward_m_s: float, right_m_s: float, down_m_s: float, yawspeed_deg_s: float
     ) -> None:
         self.calls.append(("velocity_body", forward_m_s, right_m_s, down_m_s, yawspeed_deg_s))
-        self._flying("set_velocity_body")
+        self._armed("set_velocity_body")
         self._command = (np.array([forward_m_s, right_m_s, down_m_s]), True, yawspeed_deg_s)
         self.phase = "velocity"
 
@@ -134,6 +151,6 @@ class FakeVehicleModel:
         self, north_m_s: float, east_m_s: float, down_m_s: float, yawspeed_deg_s: float
     ) -> None:
         self.calls.append(("velocity_ned", north_m_s, east_m_s, down_m_s, yawspeed_deg_s))
-        self._flying("set_velocity_ned")
+        self._armed("set_velocity_ned")
         self._command = (np.array([north_m_s, east_m_s, down_m_s]), False, yawspeed_deg_s)
         self.phase = "velocity"

@@ -102,8 +102,6 @@ def test_refusals_on_the_ground() -> None:
     with QuadRig() as rig:
         rig.step()
         rig.autopilot.arm()
-        with pytest.raises(AutopilotError, match="set_velocity_ned: refused while landed"):
-            rig.autopilot.set_velocity_ned(0.5, 0.0, 0.0, 0.0)
         with pytest.raises(AutopilotError, match="hold"):
             rig.autopilot.hold()
         with pytest.raises(AutopilotError, match="altitude_m"):
@@ -112,6 +110,73 @@ def test_refusals_on_the_ground() -> None:
             rig.autopilot.takeoff(float("nan"))
         rig.autopilot.land()  # accepted on the ground: nothing to do
         assert rig.autopilot.mode is AutopilotMode.IDLE
+
+
+def test_velocity_mode_on_the_ground_stays_landed_until_a_climb_then_lifts_off_smoothly() -> None:
+    """PX4 accepts OFFBOARD armed on the ground: zero or downward setpoints keep it landed at idle."""
+    with QuadRig() as rig:
+        ap = rig.autopilot
+        rig.step()
+        ap.arm()
+        ground = rig.state().position_enu_m.copy()
+        idle_speed = ap.params.idle_rotor_fraction * rig.drone.params.max_rotor_speed_rad_s
+        for setpoint in ((0.0, 0.0, 0.0, 0.0), (0.5, -0.3, 0.4, 20.0)):  # zero; sideways, down, yawing
+            ap.set_velocity_ned(*setpoint)
+            rig.run_for(1.0)
+            assert ap.mode is AutopilotMode.VELOCITY and ap.landed
+            assert rig.state().position_enu_m == pytest.approx(ground, abs=0.002)
+            assert abs(rig.state().yaw_enu_rad) < 0.01
+            assert ap.update(rig.state(), rig.dt_s) == pytest.approx([idle_speed] * 4)
+            assert np.linalg.norm(ap.velocity_setpoint) == 0.0
+
+        ap.set_velocity_ned(0.0, 0.0, -1.0, 0.0)  # climb at 1 m/s
+        times, climbs, heights = [], [], []
+        for i in range(3 * 240):
+            rig.step()
+            state = rig.state()
+            times.append((i + 1) * rig.dt_s)
+            climbs.append(state.velocity_enu_m_s[2])
+            heights.append(state.position_enu_m[2] - ground[2])
+            if i == 0:
+                assert ap.landed  # still on the ground while the climb ramps up
+        t, climb, height = np.array(times), np.array(climbs), np.array(heights)
+        assert not ap.landed and ap.mode is AutopilotMode.VELOCITY
+        left_ground_s = t[np.argmax(height > 0.05)]
+        assert 0.1 < left_ground_s < 0.6  # ramped, not a jump
+        assert np.max(np.diff(climb)) / rig.dt_s < 2.0 * ap.params.takeoff_acc_m_s2  # smooth spool-up
+        assert climb.max() < 1.1  # no overshoot of the commanded climb
+        assert np.all(np.abs(climb[t >= 1.0] - 1.0) < 0.1)  # tracking the commanded 1 m/s
+        assert height[-1] > 2.3
+        assert np.linalg.norm(rig.state().position_enu_m[:2] - ground[:2]) < 0.02
+
+
+def test_velocity_mode_descent_onto_the_ground_is_detected_as_landed() -> None:
+    with QuadRig() as rig:
+        rig.take_off(1.0, settle_s=0.5)
+        ap = rig.autopilot
+        ap.set_velocity_body(0.0, 0.0, 0.6, 0.0)  # down onto the ground
+        assert not ap.landed
+        assert rig.run_until(lambda: ap.landed, timeout_s=5.0)
+        assert ap.mode is AutopilotMode.VELOCITY  # still in offboard velocity control, at idle
+        assert rig.state().position_enu_m[2] == pytest.approx(rig.drone.resting_height_m, abs=0.01)
+        ap.disarm()  # allowed: on the ground
+        assert not ap.armed
+
+
+def test_hold_before_liftoff_returns_to_idle_on_the_ground() -> None:
+    with QuadRig() as rig:
+        rig.step()
+        rig.autopilot.arm()
+        rig.autopilot.set_velocity_ned(0.0, 0.0, 0.0, 0.0)
+        rig.run_for(0.2)
+        rig.autopilot.hold()  # offboard left before lifting off: stays on the ground
+        assert rig.autopilot.mode is AutopilotMode.IDLE and rig.autopilot.landed
+        rig.autopilot.set_velocity_ned(0.0, 0.0, -0.8, 0.0)
+        rig.run_for(0.1)
+        rig.autopilot.land()  # still on the ground (ramping up): back to idle, no LAND needed
+        assert rig.autopilot.mode is AutopilotMode.IDLE and rig.autopilot.landed
+        rig.run_for(0.5)
+        assert rig.state().position_enu_m[2] == pytest.approx(rig.drone.resting_height_m, abs=0.005)
 
 
 def test_hold_locks_the_position_at_entry() -> None:

@@ -9,6 +9,9 @@ do (../shared/MAVLINK_NOTES.md):
 - OFFBOARD needs a live setpoint stream, both to switch to it and to arm in it; a
   refused switch is acked ACCEPTED first, then TEMPORARILY_REJECTED (PX4's double ack),
   so clients must confirm modes from the heartbeat;
+- OFFBOARD is accepted armed on the ground, as on PX4 (MAVSDK's offboard examples
+  arm, start offboard, then climb with a velocity setpoint): the airframe stays
+  landed at idle while the setpoint does not climb and lifts off when it does;
 - setpoints older than COM_OF_LOSS_T in OFFBOARD → "Failsafe activated", system
   status CRITICAL, hold for COM_FAIL_ACT_T, then the COM_OBL_RC_ACT action (Land by
   default); no return to OFFBOARD by itself;
@@ -259,14 +262,27 @@ class Commander:
             self._enter(mode)
 
     def _enter(self, mode: Px4Mode) -> None:
-        """Make the armed airframe fly `mode`."""
-        landed = self._model.status().landed
+        """Make the armed airframe fly `mode`.
+
+        Hold and land are passed on when landed too: an airframe left in OFFBOARD on the
+        ground must stop flying the old setpoints (it stays where it is). An airframe idle
+        on the ground may refuse a hold: nothing to do then.
+        """
         if mode == modes.OFFBOARD:
             self._apply_setpoint()
-        elif mode in _HOLD_LIKE and not landed:
-            self._model.hold()
-        elif mode == modes.AUTO_LAND and not landed:
-            self._model.land()
+            return
+        if mode in _HOLD_LIKE:
+            command = self._model.hold
+        elif mode == modes.AUTO_LAND:
+            command = self._model.land
+        else:
+            return
+        try:
+            command()
+        except ModelRefused as exc:
+            if not self._model.status().landed:
+                raise
+            log.debug("%s on the ground: %s", mode.name, exc)
 
     def _apply_setpoint(self) -> None:
         if self._setpoint is None:
@@ -290,8 +306,7 @@ class Commander:
             else:
                 self._model.set_velocity_ned(a, b, down, yawspeed)
         except ModelRefused as exc:
-            # On the ground the sim's autopilot flies no velocities: take off with NAV_TAKEOFF first.
-            log.debug("setpoint not flown: %s", exc)
+            log.warning("setpoint not flown: %s", exc)
 
     def _trigger_failsafe(self, now: float) -> None:
         self.failsafe = FailsafeStage.HOLD
