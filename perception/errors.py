@@ -1,0 +1,56 @@
+"""Typed errors of the perception package.
+
+Every error names what failed (the camera source, the checkpoint file, the dataset
+file and line) so that a user can act on the message without a traceback.
+"""
+
+from __future__ import annotations
+
+
+class PerceptionError(Exception):
+    """Base class of every error raised by `perception`."""
+
+
+class CameraError(PerceptionError):
+    """A camera could not deliver a frame. Catch this to handle every camera failure."""
+
+    def __init__(self, source: str, message: str) -> None:
+        super().__init__(f"camera {source}: {message}")
+        self.source = source
+
+
+class CameraOpenError(CameraError):
+    """The source could not be opened (bad URL, refused connection, missing device or file)."""
+
+
+class CameraTimeoutError(CameraError):
+    """No new frame arrived within the timeout (a frozen or stalled stream)."""
+
+    def __init__(self, source: str, timeout_s: float, message: str = "") -> None:
+        detail = f": {message}" if message else ""
+        super().__init__(source, f"no new frame within {timeout_s:.3g} s{detail}")
+        self.timeout_s = timeout_s
+
+
+class CameraStreamEndedError(CameraError):
+    """The stream ended or dropped (server closed the connection, end of a video file)."""
+
+
+class CameraClosedError(CameraError):
+    """`read()` was called on a camera after `close()`."""
+
+
+class CheckpointError(PerceptionError):
+    """A detector checkpoint is missing, corrupt or does not match its config."""
+
+    def __init__(self, path: object, message: str) -> None:
+        super().__init__(f"detector checkpoint {path}: {message}")
+        self.path = path
+
+
+class DatasetError(PerceptionError):
+    """A dataset folder is missing files or holds a malformed manifest row."""
+
+    def __init__(self, path: object, message: str) -> None:
+        super().__init__(f"dataset {path}: {message}")
+        self.path = path
