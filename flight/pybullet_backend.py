@@ -54,7 +54,6 @@ class PyBulletVehicle(Vehicle):
         self._owns_world = owns_world
         self._setpoint: VelocityBody | None = None
         self._offboard = False
-        self._carry_s = 0.0
         # Local positions are relative to home, as MAVLink's LOCAL_POSITION_NED; before the first
         # arming (which sets home) they are relative to where the drone stood when handed over.
         self._origin_enu = np.asarray(world.state().position_enu_m, dtype=float)
@@ -69,10 +68,13 @@ class PyBulletVehicle(Vehicle):
         return self.world.time_s
 
     def sleep(self, seconds: float) -> None:
-        """Step the physics for `seconds` of simulated time (fractions of a step carry over)."""
-        total = self._carry_s + max(0.0, seconds)
-        steps = int(total / self.world.dt_s + 1e-9)
-        self._carry_s = total - steps * self.world.dt_s
+        """Step the physics for at least `seconds` of simulated time (whole steps, rounded up).
+
+        Like `time.sleep`, a sleep never ends early: any positive sleep advances the
+        clock by at least one physics step, so a caller waiting for the clock to pass
+        a deadline always gets there.
+        """
+        steps = math.ceil(max(0.0, seconds) / self.world.dt_s - 1e-9)
         self.world.step(steps)
 
     def _step_until(

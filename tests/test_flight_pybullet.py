@@ -82,3 +82,16 @@ def test_move_command_explains_a_bad_url(capsys: pytest.CaptureFixture[str]) -> 
 
     assert main(["--vehicle", "udpin://localhost:14540"]) == 1
     assert "udpin://127.0.0.1:14540" in capsys.readouterr().err
+
+
+def test_sleep_never_ends_early_and_always_advances_the_clock(vehicle: PyBulletVehicle) -> None:
+    dt = vehicle.world.dt_s
+    start = vehicle.time_s()
+    vehicle.sleep(dt * 1e-6)  # a sliver: still one whole step, never zero (no busy loop for callers)
+    assert vehicle.time_s() == pytest.approx(start + dt)
+    vehicle.sleep(2.5 * dt)  # rounded up to whole steps
+    assert vehicle.time_s() == pytest.approx(start + 4 * dt)
+    vehicle.sleep(10 * dt)  # whole steps are exact
+    assert vehicle.time_s() == pytest.approx(start + 14 * dt)
+    vehicle.sleep(0.0)
+    assert vehicle.time_s() == pytest.approx(start + 14 * dt)
