@@ -13,7 +13,7 @@ import sys
 
 BENCHMARKS: dict[str, tuple[str, str]] = {
     "sim": ("sim_world.bench", "physics and camera real-time factors, render times, collection throughput"),
-    "perception": ("perception.bench", "detector and planner inference speed"),
+    "perception": ("perception.bench", "detector latency, stream-camera latency, detector accuracy"),
     "flight": ("flight.bench", "vehicle command and telemetry latency"),
 }
 

@@ -1,0 +1,202 @@
+"""Accuracy of a detector against the dataset's truth.
+
+The figures the issue asks for, on the held-out `test` split (scene seeds never
+trained on) and the `empty` split (rows of the `goal` and `train` splits count
+like `test` rows, for validation):
+
+- recall for targets fully in view: a detection whose centre is within
+  `match_px` (default ε) of the truth centre;
+- centre error (median, 95th percentile, max) over fully-in-view targets detected at all;
+- false-positive rate on `empty` images (any detection is a false positive);
+- wrong confident boxes: detections on `test` rows whose target is not there or
+  whose centre is more than `match_px` off (partly visible and absent targets included);
+- agreement of the centring test on the detection with the truth label
+  (centred ⇔ |du| ≤ ε and |dv| ≤ ε on the truth offset; out-of-view ⇒ not centred).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from perception.centring import default_epsilon_px, is_centred
+from perception.detector import Detector
+from perception.types import Detection
+from sim_world.dataset import DatasetError, load_manifest
+
+
+@dataclass(frozen=True)
+class DetectorMetrics:
+    """Accuracy figures; rates are fractions in [0, 1], errors in pixels of the evaluated images."""
+
+    epsilon_px: float
+    match_px: float
+    n_fully_in_view: int
+    recall_fully_in_view: float
+    centre_error_median_px: float
+    centre_error_p95_px: float
+    centre_error_max_px: float
+    n_partly_in_view: int
+    recall_partly_in_view: float
+    n_out_of_view: int
+    n_wrong_confident: int
+    n_empty: int
+    false_positive_rate_empty: float
+    kind_accuracy: float
+    n_centring: int
+    centring_agreement: float
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values for JSON; an undefined figure (no rows of its kind) is None, not NaN."""
+        return {k: None if isinstance(v, float) and np.isnan(v) else v for k, v in asdict(self).items()}
+
+    def summary(self) -> str:
+        return (
+            f"recall(full) {self.recall_fully_in_view:.4f} on {self.n_fully_in_view}, "
+            f"centre err median {self.centre_error_median_px:.2f} px p95 {self.centre_error_p95_px:.2f} px "
+            f"max {self.centre_error_max_px:.1f} px, recall(partial) {self.recall_partly_in_view:.3f} on "
+            f"{self.n_partly_in_view}, wrong confident {self.n_wrong_confident}, "
+            f"FP(empty) {self.false_positive_rate_empty:.4f} on {self.n_empty}, "
+            f"kind acc {self.kind_accuracy:.3f}, "
+            f"centring agreement {self.centring_agreement:.4f} on {self.n_centring}"
+        )
+
+
+def _rate(hits: int, total: int) -> float:
+    return hits / total if total else float("nan")
+
+
+def truth_is_centred(row: dict[str, Any], epsilon_px: float) -> bool:
+    """The truth label: centred exactly when `label_from_offset(du, dv, ε)` is (none, none)."""
+    du, dv = row["offset_px"]
+    return bool(row["in_view"]) and abs(du) <= epsilon_px and abs(dv) <= epsilon_px
+
+
+def evaluate_detections(
+    rows: Sequence[dict[str, Any]],
+    detections: Sequence[Detection | None],
+    width: int,
+    height: int,
+    epsilon_px: float,
+    match_px: float | None = None,
+) -> DetectorMetrics:
+    """Score detections against their manifest rows (same order)."""
+    if len(rows) != len(detections):
+        raise ValueError(f"{len(rows)} rows but {len(detections)} detections")
+    match = epsilon_px if match_px is None else match_px
+    errors_full: list[float] = []
+    hits_full = n_full = hits_partial = n_partial = n_out = wrong = 0
+    fp_empty = n_empty = kind_hits = kind_total = agree = n_centring = 0
+    for row, det in zip(rows, detections, strict=True):
+        if row["split"] == "empty":
+            n_empty += 1
+            fp_empty += det is not None
+        positive = bool(row["in_view"]) and row["bbox_px"] is not None and row["split"] != "empty"
+        err = float("inf")
+        if det is not None and positive:
+            err = float(
+                np.hypot(det.centre_px[0] - row["centre_px"][0], det.centre_px[1] - row["centre_px"][1])
+            )
+        if row["split"] != "empty":
+            if positive and row["fully_in_view"]:
+                n_full += 1
+                hits_full += err <= match
+                if det is not None:
+                    errors_full.append(err)
+            elif positive:
+                n_partial += 1
+                hits_partial += err <= match
+            else:
+                n_out += 1
+            wrong += det is not None and err > match
+            if det is not None and positive and err <= match and det.kind is not None:
+                kind_total += 1
+                kind_hits += det.kind == row["target_kind"]
+        n_centring += 1
+        agree += is_centred(det, epsilon_px, width, height) == truth_is_centred(row, epsilon_px)
+    errs = np.asarray(errors_full) if errors_full else np.asarray([float("nan")])
+    return DetectorMetrics(
+        epsilon_px=epsilon_px,
+        match_px=match,
+        n_fully_in_view=n_full,
+        recall_fully_in_view=_rate(hits_full, n_full),
+        centre_error_median_px=float(np.median(errs)),
+        centre_error_p95_px=float(np.percentile(errs, 95)),
+        centre_error_max_px=float(np.max(errs)),
+        n_partly_in_view=n_partial,
+        recall_partly_in_view=_rate(hits_partial, n_partial),
+        n_out_of_view=n_out,
+        n_wrong_confident=wrong,
+        n_empty=n_empty,
+        false_positive_rate_empty=_rate(fp_empty, n_empty),
+        kind_accuracy=_rate(kind_hits, kind_total),
+        n_centring=n_centring,
+        centring_agreement=_rate(agree, n_centring),
+    )
+
+
+def latency_ms(fn: Callable[[], object], repeats: int, warmup: int = 10) -> dict[str, float]:
+    """p50 / p90 / p99 / max wall time of `fn()` in milliseconds."""
+    for _ in range(warmup):
+        fn()
+    times = np.empty(repeats)
+    for r in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times[r] = time.perf_counter() - start
+    times *= 1000.0
+    return {
+        "p50_ms": float(np.percentile(times, 50)),
+        "p90_ms": float(np.percentile(times, 90)),
+        "p99_ms": float(np.percentile(times, 99)),
+        "max_ms": float(times.max()),
+        "repeats": repeats,
+    }
+
+
+def evaluate_on_dataset(
+    detector: Detector,
+    data_dir: str | Path,
+    splits: Sequence[str] = ("test", "empty"),
+    limit_per_split: int | None = None,
+    batch_size: int = 32,
+) -> DetectorMetrics:
+    """Run a detector on a dataset folder's images (in their own pixels) and score it.
+
+    `empty` rows are taken only from test scene seeds (all of them, as `dronectl
+    collect` plans them), so a training set's scenes never inflate the figures.
+    """
+    root = Path(data_dir)
+    rows, meta = load_manifest(root)
+    test_seeds = set(meta.get("test_scene_seeds") or [])
+    chosen: list[dict[str, Any]] = []
+    for split in splits:
+        picked = [
+            r for r in rows if r["split"] == split and (split != "empty" or r["scene_seed"] in test_seeds)
+        ]
+        chosen += picked[:limit_per_split] if limit_per_split is not None else picked
+    if not chosen:
+        raise DatasetError(f"{root}: no rows in splits {list(splits)}")
+    detections: list[Detection | None] = []
+    detect_batch = getattr(detector, "detect_batch", None)
+    for start in tqdm(range(0, len(chosen), batch_size), desc=f"evaluate {root.name}", leave=False):
+        images = [read_image_rgb(root / r["image"]) for r in chosen[start : start + batch_size]]
+        detections += detect_batch(images) if detect_batch else [detector.detect(im) for im in images]
+    width, height = int(meta["camera"]["width"]), int(meta["camera"]["height"])
+    eps = float(meta.get("epsilon_px") or default_epsilon_px(width))
+    return evaluate_detections(chosen, detections, width, height, eps)
+
+
+def read_image_rgb(path: Path) -> np.ndarray:
+    """An image file as RGB uint8 in its own size; DatasetError naming the file if unreadable."""
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise DatasetError(f"{path}: not a readable image")
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)

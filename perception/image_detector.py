@@ -1,0 +1,166 @@
+"""The image-based target detector: pixels in, `Detection | None` out.
+
+Loads a run folder written by `dronectl train-detector` (`model.safetensors` +
+`config.json`; loading parses JSON and tensors only and never executes code) or the
+weights shipped in `perception/assets/detector/`. A frame of any size is resized to
+the network's input size and the result scaled back to the frame's pixels.
+
+Decoding takes the single strongest heatmap peak over all kinds: its value is the
+confidence, its channel the kind, the offset head places the centre inside the
+cell and the edge head gives the box. Below `score_threshold` the detector
+returns None: an absent target, or one whose centre is out of the image (the
+network is trained to stay silent then, so it never reports a confident box
+for a target it cannot centre on).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+from safetensors.torch import load_file, save_file
+
+from perception.detector_model import EDGE_SCALE_PX, STRIDE, CentreNet, DetectorConfig, fuse_for_inference
+from perception.errors import CheckpointError
+from perception.types import Detection
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT_FORMAT = "drone-inspect/detector/1"
+WEIGHTS_FILE = "model.safetensors"
+CONFIG_FILE = "config.json"
+SHIPPED_DIR = Path(__file__).resolve().parent / "assets" / "detector"
+
+
+def normalise(images_uint8: torch.Tensor) -> torch.Tensor:
+    """(B, 3, S, S) uint8 → float inputs centred on 0 (the same in training and inference)."""
+    return (images_uint8.float() / 255.0 - 0.5) / 0.25
+
+
+def save_checkpoint(run_dir: Path, model: CentreNet, extra: dict[str, object] | None = None) -> None:
+    """Write `model.safetensors` and `config.json` (format tag, detector config, `extra` info)."""
+    run_dir.mkdir(parents=True, exist_ok=True)
+    state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
+    save_file(state, str(run_dir / WEIGHTS_FILE))
+    payload = {"format": CHECKPOINT_FORMAT, "detector": model.config.to_json_dict(), **(extra or {})}
+    (run_dir / CONFIG_FILE).write_text(json.dumps(payload, indent=2) + "\n", encoding="utf-8")
+
+
+def load_config(run_dir: Path) -> DetectorConfig:
+    """The detector config of a run folder; CheckpointError naming the file on any problem."""
+    path = run_dir / CONFIG_FILE
+    try:
+        payload = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise CheckpointError(
+            path, "missing (is this a folder written by `dronectl train-detector`?)"
+        ) from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CheckpointError(path, f"unreadable: {exc}") from None
+    if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
+        got = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
+        raise CheckpointError(path, f"field 'format' must be {CHECKPOINT_FORMAT!r}, got {got!r}")
+    if not isinstance(payload.get("detector"), dict):
+        raise CheckpointError(path, "field 'detector' is missing or not an object")
+    try:
+        return DetectorConfig.from_json_dict(payload["detector"])
+    except (TypeError, ValueError) as exc:
+        raise CheckpointError(path, f"field 'detector': {exc}") from None
+
+
+def load_model(run_dir: str | Path) -> CentreNet:
+    """The trained network of a run folder (eval mode, not fused)."""
+    root = Path(run_dir)
+    config = load_config(root)
+    path = root / WEIGHTS_FILE
+    if not path.is_file():
+        raise CheckpointError(path, "missing")
+    try:
+        state = load_file(str(path))
+    except Exception as exc:  # safetensors raises its own SafetensorError, OSError, ...
+        raise CheckpointError(path, f"corrupt or not a safetensors file: {exc}") from None
+    model = CentreNet(config)
+    try:
+        model.load_state_dict(state, strict=True)
+    except RuntimeError as exc:
+        first = str(exc).strip().splitlines()
+        raise CheckpointError(path, f"does not match {CONFIG_FILE}: {' '.join(first[:3])}") from None
+    if not all(torch.isfinite(t).all() for t in state.values() if t.is_floating_point()):
+        raise CheckpointError(path, "holds NaN or infinite weights")
+    return model.eval()
+
+
+class ImageDetector:
+    """Detect the inspection target in RGB images with a trained `CentreNet`.
+
+    `score_threshold` overrides the checkpoint's. The detector takes the model over
+    (its batch norms are folded in place). Run single frames on one torch thread
+    (`torch.set_num_threads(1)`) for the steadiest latency on a small CPU.
+    """
+
+    def __init__(self, model: CentreNet, score_threshold: float | None = None) -> None:
+        self.config = model.config
+        self.score_threshold = self.config.score_threshold if score_threshold is None else score_threshold
+        if not 0.0 < self.score_threshold < 1.0:
+            raise ValueError(f"score_threshold must be in (0, 1), got {self.score_threshold}")
+        self._model = fuse_for_inference(model).to(memory_format=torch.channels_last)
+
+    @classmethod
+    def load(cls, run_dir: str | Path, score_threshold: float | None = None) -> ImageDetector:
+        return cls(load_model(run_dir), score_threshold)
+
+    @classmethod
+    def shipped(cls, score_threshold: float | None = None) -> ImageDetector:
+        """The weights shipped with the package (see perception/assets/README.md)."""
+        return cls.load(SHIPPED_DIR, score_threshold)
+
+    def _prepare(self, image: np.ndarray) -> np.ndarray:
+        if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+            raise ValueError(f"detect needs an RGB uint8 (H, W, 3) image, got {image.dtype} {image.shape}")
+        size = self.config.input_size
+        if image.shape[:2] != (size, size):
+            image = cv2.resize(image, (size, size), interpolation=cv2.INTER_AREA)
+        return image
+
+    def detect(self, image: np.ndarray) -> Detection | None:
+        """The target in one RGB uint8 (H, W, 3) image, or None."""
+        return self.detect_batch([image])[0]
+
+    @torch.inference_mode()
+    def detect_batch(self, images: Sequence[np.ndarray]) -> list[Detection | None]:
+        """`detect` for several images at once (evaluation)."""
+        if not images:
+            return []
+        batch = np.stack([self._prepare(im) for im in images])  # (B, S, S, 3)
+        x = normalise(torch.from_numpy(batch).permute(0, 3, 1, 2)).contiguous(
+            memory_format=torch.channels_last
+        )
+        out = self._model(x)  # (B, K + 6, G, G)
+        return [self._decode(out[i], images[i].shape[1], images[i].shape[0]) for i in range(len(images))]
+
+    def _decode(self, out: torch.Tensor, width: int, height: int) -> Detection | None:
+        k = len(self.config.kinds)
+        grid = out.shape[-1]
+        heat = out[:k]
+        flat = int(torch.argmax(heat))
+        kind, cell = divmod(flat, grid * grid)
+        j, i = divmod(cell, grid)
+        score = float(torch.sigmoid(heat[kind, j, i]))
+        if score < self.score_threshold:
+            return None
+        sx, sy = width / self.config.input_size, height / self.config.input_size
+        u = (i + float(out[k, j, i])) * STRIDE * sx
+        v = (j + float(out[k + 1, j, i])) * STRIDE * sy
+        left, top, right, bottom = (torch.exp(out[k + 2 : k + 6, j, i]) * EDGE_SCALE_PX).tolist()
+        bbox = (
+            max(0.0, u - left * sx),
+            max(0.0, v - top * sy),
+            min(float(width), u + right * sx),
+            min(float(height), v + bottom * sy),
+        )
+        return Detection(bbox_px=bbox, centre_px=(u, v), confidence=score, kind=self.config.kinds[kind])
