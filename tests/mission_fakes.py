@@ -1,0 +1,175 @@
+"""Fakes for unit tests of the centring loop and the mission runner (not for anything else).
+
+`FakeVehicle` is a kinematic point: a velocity setpoint moves it exactly, `hold()`
+stops it, time advances only in `sleep()`. `FakeCamera` returns blank frames and
+`FakeDetector` derives the target's pixel position from the fake vehicle's
+position by a pinhole relation, so the loop can be run closed-loop without
+physics or rendering. `FakePlanner` replays a script of actions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+
+import numpy as np
+
+from controller.actions import ALL_ACTIONS, Action
+from controller.planners import Observation, Plan
+from flight.types import (
+    Attitude,
+    FlightMode,
+    PositionNed,
+    Telemetry,
+    VelocityBody,
+    VelocityNed,
+)
+from flight.vehicle import Vehicle
+from perception.camera import Camera
+from perception.types import Detection, Frame
+
+IMAGE_SIZE = 224
+PX_PER_M = 97.0  # a 60° camera 2 m from the wall: fx / distance = 194 / 2
+
+
+class FakeVehicle(Vehicle):
+    """A kinematic point vehicle facing north. `fail_on_move` raises on that velocity command (1-based)."""
+
+    realtime = False
+
+    def __init__(self, east_m: float = 0.0, up_m: float = 0.0, fail_on_move: int | None = None) -> None:
+        self.east_m, self.up_m = east_m, up_m
+        self.velocity = VelocityBody()
+        self.clock_s = 0.0
+        self.calls: list[str] = []
+        self.in_air = False
+        self.armed = False
+        self.fail_on_move = fail_on_move
+        self.moves_commanded = 0
+
+    def connect(self, timeout_s: float | None = None) -> None:
+        self.calls.append("connect")
+
+    def wait_ready(self, timeout_s: float | None = None) -> None:
+        self.calls.append("wait_ready")
+
+    def arm(self, timeout_s: float | None = None) -> None:
+        self.calls.append("arm")
+        self.armed = True
+
+    def takeoff(self, altitude_m: float, timeout_s: float | None = None) -> None:
+        self.calls.append("takeoff")
+        self.in_air = True
+
+    def start_offboard(self, timeout_s: float | None = None) -> None:
+        self.calls.append("start_offboard")
+
+    def set_velocity_body(self, velocity: VelocityBody) -> None:
+        if not velocity.is_zero() and velocity != self.velocity:
+            self.moves_commanded += 1
+            if self.fail_on_move is not None and self.moves_commanded >= self.fail_on_move:
+                raise RuntimeError("FakeVehicle: simulated link failure")
+        self.velocity = velocity
+
+    def hold(self) -> None:
+        self.calls.append("hold")
+        self.velocity = VelocityBody()
+
+    def stop_offboard(self, timeout_s: float | None = None) -> None:
+        self.calls.append("stop_offboard")
+        self.velocity = VelocityBody()
+
+    def land(self, timeout_s: float | None = None) -> None:
+        self.calls.append("land")
+        self.in_air = False
+
+    def disarm(self, timeout_s: float | None = None) -> None:
+        self.calls.append("disarm")
+        self.armed = False
+
+    def telemetry(self) -> Telemetry:
+        v = self.velocity
+        return Telemetry(
+            position_ned=PositionNed(0.0, self.east_m, -self.up_m),
+            velocity_ned=VelocityNed(v.forward_m_s, v.right_m_s, v.down_m_s),
+            attitude=Attitude(0.0, 0.0, 0.0),
+            armed=self.armed,
+            in_air=self.in_air,
+            flight_mode=FlightMode.OFFBOARD,
+            timestamp_s=self.clock_s,
+        )
+
+    def time_s(self) -> float:
+        return self.clock_s
+
+    def sleep(self, seconds: float) -> None:
+        self.clock_s += seconds
+        self.east_m += self.velocity.right_m_s * seconds
+        self.up_m -= self.velocity.down_m_s * seconds
+
+    def close(self) -> None:
+        self.calls.append("close")
+
+
+class FakeCamera(Camera):
+    """Blank RGB frames, numbered."""
+
+    def __init__(self, size: int = IMAGE_SIZE) -> None:
+        self.size = size
+        self.count = 0
+        self.closed = False
+
+    def read(self, timeout_s: float | None = None) -> Frame:
+        frame = Frame(np.zeros((self.size, self.size, 3), np.uint8), float(self.count), self.count)
+        self.count += 1
+        return frame
+
+    def close(self) -> None:
+        self.closed = True
+
+
+class FakeDetector:
+    """The target at (0 east, 0 up) seen from the fake vehicle; None outside the image or on a told miss."""
+
+    def __init__(
+        self,
+        vehicle: FakeVehicle,
+        misses: Iterable[int] = (),
+        size: int = IMAGE_SIZE,
+        bias_px: tuple[float, float] = (0.0, 0.0),
+    ) -> None:
+        self.vehicle = vehicle
+        self.size = size
+        self.misses = set(misses)  # call numbers (0-based) that return None
+        self.bias_px = bias_px  # a detector error: added to the true centre
+        self.calls = 0
+
+    def truth_offset(self) -> tuple[float, float]:
+        """(du, dv): the drone right of the target puts the target left in the image, and so on."""
+        return -self.vehicle.east_m * PX_PER_M, self.vehicle.up_m * PX_PER_M
+
+    def detect(self, image: np.ndarray) -> Detection | None:
+        call, self.calls = self.calls, self.calls + 1
+        du, dv = self.truth_offset()
+        u, v = self.size / 2 + du + self.bias_px[0], self.size / 2 + dv + self.bias_px[1]
+        if call in self.misses or not (0 <= u < self.size and 0 <= v < self.size):
+            return None
+        return Detection((u - 10, v - 10, u + 10, v + 10), (u, v), 0.9, "gauge")
+
+
+class FakePlanner:
+    """Replays `script` (action indices), then repeats its last entry; scores = index distances."""
+
+    name = "fake"
+
+    def __init__(self, script: Iterable[int] | Callable[[Observation], int]) -> None:
+        self.script = script if callable(script) else list(script)
+        self.calls = 0
+
+    def plan(self, observation: Observation) -> Plan:
+        if callable(self.script):
+            index = self.script(observation)
+        else:
+            index = self.script[min(self.calls, len(self.script) - 1)]
+        self.calls += 1
+        action: Action = ALL_ACTIONS[index]
+        return Plan(action, tuple(float(abs(i - index)) for i in range(len(ALL_ACTIONS))))

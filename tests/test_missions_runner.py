@@ -1,0 +1,137 @@
+"""Flying a mission on fakes: the safe stop, the report written even when the flight dies mid-way."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from mission_fakes import FakeCamera, FakeDetector, FakePlanner, FakeVehicle
+
+from controller.flight_kit import FlightKit
+from controller.mission_runner import fly_kit
+from controller.mission_schema import parse_mission
+from controller.planners import ClassicPlanner
+from flight.safety import GeofenceBox, SafetyLimits
+
+RIGHT = 7
+LIMITS = SafetyLimits(
+    geofence=GeofenceBox(half_width_north_m=5, half_width_east_m=5, max_up_m=5, max_down_m=5)
+)
+
+
+def kit_for(vehicle: FakeVehicle, planner, detector: FakeDetector | None = None, camera=None) -> FlightKit:
+    detector = detector or FakeDetector(vehicle)
+    return FlightKit(
+        vehicle=vehicle,
+        camera=camera or FakeCamera(),
+        detector=detector,
+        planner=planner,
+        epsilon_px=10.0,
+        instruction="center the gauge",
+        truth_probe=detector.truth_offset,
+        info={"fake": True},
+    )
+
+
+def read_report(out: Path) -> dict:
+    return json.loads((out / "report.json").read_text())
+
+
+def test_a_centred_mission_passes_lands_and_writes_every_file(tmp_path: Path) -> None:
+    vehicle = FakeVehicle(east_m=-0.8, up_m=0.4)
+    mission = parse_mission({"name": "fake-ok", "planner": "classic", "expect": {"max_steps": 12}})
+    result = fly_kit(kit_for(vehicle, ClassicPlanner()), mission, tmp_path, LIMITS)
+    assert result.passed, result.failures
+    assert result.outcome == "centred"
+    assert result.final_truth_error_px is not None and result.final_truth_error_px <= 10.0
+    assert vehicle.calls[-3:] == ["stop_offboard", "land", "disarm"]
+    report = read_report(tmp_path)
+    assert report["status"] == "finished" and report["passed"] is True
+    assert len(report["steps"]) == result.steps + 1  # each decision, plus the final centred frame
+    assert report["steps"][0]["action"] == "right/down"
+    assert len(report["steps"][0]["pose"]) == 4
+    assert (tmp_path / "camera.gif").stat().st_size > 0
+    assert (tmp_path / "trajectory.png").stat().st_size > 0
+
+
+def test_target_lost_ends_holding_then_landing_and_fails_the_mission(tmp_path: Path) -> None:
+    vehicle = FakeVehicle(east_m=-0.5)
+    detector = FakeDetector(vehicle, misses=range(1, 100))
+    mission = parse_mission({"name": "fake-lost", "planner": "classic", "loop": {"lost_recoveries": 0}})
+    result = fly_kit(kit_for(vehicle, FakePlanner([RIGHT]), detector), mission, tmp_path, LIMITS)
+    assert result.outcome == "target_lost" and not result.passed
+    assert "outcome target_lost, expected centred" in result.failures
+    last_hold = len(vehicle.calls) - 1 - vehicle.calls[::-1].index("hold")
+    assert vehicle.calls.index("land") > last_hold
+    assert not vehicle.in_air
+    assert read_report(tmp_path)["outcome"] == "target_lost"
+
+
+def test_expected_target_lost_passes(tmp_path: Path) -> None:
+    vehicle = FakeVehicle(east_m=-0.5)
+    detector = FakeDetector(vehicle, misses=range(100))  # never seen
+    mission = parse_mission({"name": "fake-unseen", "expect": {"outcome": "target_lost"}})
+    result = fly_kit(kit_for(vehicle, FakePlanner([RIGHT]), detector), mission, tmp_path, LIMITS)
+    assert result.passed, result.failures
+    assert result.moves == 0  # never flies without a detection
+
+
+def test_report_survives_an_error_mid_flight(tmp_path: Path) -> None:
+    vehicle = FakeVehicle(east_m=-1.0, fail_on_move=3)
+    mission = parse_mission({"name": "fake-crash", "planner": "classic", "loop": {"scale_moves": False}})
+    result = fly_kit(kit_for(vehicle, FakePlanner([RIGHT])), mission, tmp_path, LIMITS)
+    assert result.outcome == "aborted" and not result.passed
+    assert result.error is not None and "simulated link failure" in result.error
+    assert "hold" in vehicle.calls and "land" in vehicle.calls  # flight_guard's safe stop
+    report = read_report(tmp_path)
+    assert report["status"] == "finished" and report["outcome"] == "aborted"
+    assert [s["move"]["commanded_m"]["right_m"] for s in report["steps"]] == [0.3, 0.3]
+    assert "simulated link failure" in report["error"]
+
+
+class InterruptingCamera(FakeCamera):
+    def __init__(self, at_read: int) -> None:
+        super().__init__()
+        self.at_read = at_read
+
+    def read(self, timeout_s: float | None = None):
+        if self.count == self.at_read:
+            raise KeyboardInterrupt
+        return super().read(timeout_s)
+
+
+def test_ctrl_c_lands_and_keeps_the_steps(tmp_path: Path) -> None:
+    vehicle = FakeVehicle(east_m=-1.0)
+    mission = parse_mission({"name": "fake-ctrl-c"})
+    kit = kit_for(vehicle, FakePlanner([RIGHT]), camera=InterruptingCamera(at_read=2))
+    with pytest.raises(KeyboardInterrupt):
+        fly_kit(kit, mission, tmp_path, LIMITS)
+    assert "land" in vehicle.calls and not vehicle.in_air
+    report = read_report(tmp_path)
+    assert report["outcome"] == "aborted" and len(report["steps"]) == 2
+    assert "interrupted" in report["error"]
+
+
+def test_step_budget_expectation_is_judged(tmp_path: Path) -> None:
+    vehicle = FakeVehicle(east_m=-1.0)
+    mission = parse_mission({"name": "fake-budget", "planner": "classic", "expect": {"max_steps": 1}})
+    result = fly_kit(kit_for(vehicle, ClassicPlanner()), mission, tmp_path, LIMITS)
+    assert result.outcome == "centred" and not result.passed
+    assert any("steps > the expected at most 1" in f for f in result.failures)
+
+
+def test_default_mission_in_process_ends_centred_per_truth(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """`dronectl fly` with no mission: the real world, image detector and shipped latent planner."""
+    from tools import fly_cmd
+
+    assert fly_cmd.main(["--out", str(tmp_path)]) == 0
+    report = read_report(tmp_path)
+    assert report["outcome"] == "centred" and report["passed"] is True
+    du, dv = report["final_offset_px"]["truth"]
+    assert max(abs(du), abs(dv)) <= report["epsilon_px"]
+    assert report["steps"][0]["distances"] is not None and len(report["steps"][0]["distances"]) == 9
+    out = capsys.readouterr().out
+    assert "PASS  default: centred" in out and str(tmp_path / "report.json") in out
