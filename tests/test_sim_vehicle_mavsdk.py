@@ -19,7 +19,7 @@ from sim_world.mavlink.world_model import WorldVehicleModel
 from sim_world.mavlink_vehicle import SimVehicle
 from sim_world.world import World, WorldConfig
 
-PORT = 14650
+PORT = 14640  # 14640-14641; 14650-14669 belong to test_sim_vehicle_offboard_ground.py
 
 
 def _wait(predicate, timeout_s: float) -> bool:
