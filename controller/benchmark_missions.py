@@ -56,6 +56,8 @@ class BenchmarkConfig:
     """`image` (what the product uses) or `truth` (in-process only: isolates the planners from detection)."""
     detector_checkpoint: str | None = None
     """The image detector's run folder; None: its shipped weights."""
+    scale_moves: bool = True
+    """The loop's move scheme: scaled with the detector's offset (default) or the paper's fixed lengths."""
     parallel: int = 1
     udp_port_base: int = 14860
     http_port_base: int = 18860
@@ -98,6 +100,7 @@ def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozen
                 "detector": config.detector,
                 "epsilon_px": config.epsilon_px,
                 "max_steps": config.max_steps,
+                "loop": {"scale_moves": config.scale_moves},
                 "expect": {"outcome": "centred", "max_steps": config.max_steps},
                 "ports": PortSpec(
                     mavlink_udp=config.udp_port_base + UDP_PORTS_PER_MISSION * slot,
@@ -217,7 +220,8 @@ def format_summary(summary: dict[str, Any]) -> str:
     cfg = summary["config"]
     lines = [
         f"{cfg['n']} missions per planner, seed {cfg['seed']}, vehicle {cfg['vehicle']}, "
-        f"budget {cfg['max_steps']} steps, {summary['wall_s']:.0f} s",
+        f"budget {cfg['max_steps']} steps, {'scaled' if cfg.get('scale_moves', True) else 'fixed'} moves, "
+        f"{summary['wall_s']:.0f} s",
         f"{'planner':<8} {'success':>15} {'mean steps':>10} {'/oracle':>8} {'offset px mean/p95/max':>23} "
         f"{'refinement moves':>16} {'overhead ms':>11}",
     ]

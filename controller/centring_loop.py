@@ -45,8 +45,9 @@ that both arrive together.
 
 Target lost (the detector sees nothing): hold, and re-read up to `lost_rereads`
 frames (a single missed detection is common). If it is still lost and a move
-brought us here, undo that move once (bounded by `lost_recoveries`; its axes'
-lengths shrink, since it overshot out of view). Otherwise stop with the outcome
+brought us here, undo that move once (bounded by `lost_recoveries` and by the
+step budget, which it counts against; its axes' lengths shrink, since it overshot
+out of view). Otherwise stop with the outcome
 `target_lost`, holding. The loop never moves without a detection, except to
 undo its own last move.
 
@@ -392,7 +393,8 @@ class CentringLoop:
             state.rereads += 1
             self.vehicle.sleep(cfg.settle_s)
             return None
-        if state.last_move is not None and state.recoveries < cfg.lost_recoveries:
+        within_budget = state.decisions < cfg.max_steps  # a recovery move is a step of the budget too
+        if state.last_move is not None and state.recoveries < cfg.lost_recoveries and within_budget:
             action, (right_m, up_m) = state.last_move
             log.warning("target lost after moving %s: undoing that move", action.name)
             for axis, length in enumerate((right_m, up_m)):

@@ -35,6 +35,9 @@ from sim_world.mavlink.telemetry import DEFAULT_RATES_HZ, MessageScheduler, Tele
 
 log = logging.getLogger(__name__)
 
+VIDEO_DEATH_GRACE_S = 0.5
+"""On close, how long a render process killed with us (a process-group SIGTERM) may take to die."""
+
 
 class VideoFeed(Protocol):
     """The camera stream beside the vehicle (`sim_world.mavlink.video.WorldVideoFeed`)."""
@@ -54,6 +57,11 @@ class VideoFeed(Protocol):
 
     def capture(self) -> None:
         """Called by the vehicle loop after each physics batch: take the drone's pose for the next frame."""
+        ...
+
+    @property
+    def alive(self) -> bool:
+        """Whether the render process still runs."""
         ...
 
     def close(self) -> None: ...
@@ -148,7 +156,17 @@ class SimVehicle:
             if self._thread.is_alive():
                 log.error("sim vehicle loop did not stop within %.1f s", timeout_s)
         if self._video is not None:
-            self._video.close()
+            # `timeout`, a supervisor or a closing terminal SIGTERMs the whole process group: the render
+            # process then dies with us, and its stop event must not be set, since a multiprocessing
+            # Event's set() waits for every sleeper to wake and a dead one never does (sim-vehicle hung
+            # here). A group signal kills it within milliseconds: wait that long before deciding.
+            deadline = time.monotonic() + VIDEO_DEATH_GRACE_S
+            while self._video.alive and time.monotonic() < deadline:
+                time.sleep(0.02)
+            if self._video.alive:
+                self._video.close()
+            else:
+                log.warning("the video render process had already exited: not stopping it")
         if self._link is not None:
             self._link.close()
             self._link = None

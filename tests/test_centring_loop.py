@@ -180,6 +180,14 @@ def test_target_lost_recovery_undoes_the_last_move_once() -> None:
     assert vehicle.east_m == pytest.approx(-0.5)
 
 
+def test_no_recovery_move_beyond_the_step_budget() -> None:
+    vehicle = FakeVehicle(east_m=-0.5)
+    detector = FakeDetector(vehicle, misses=range(1, 100))
+    result = make_loop(vehicle, FakePlanner([RIGHT]), detector, lost_rereads=0, max_steps=1).run()
+    assert result.outcome is Outcome.TARGET_LOST
+    assert [s.event for s in result.steps] == ["", "lost"] and result.moves == 1
+
+
 def test_recovery_brings_the_target_back_and_the_loop_goes_on() -> None:
     vehicle = FakeVehicle(east_m=-1.0)  # the first move right is fine; the planner then overshoots up
     detector = FakeDetector(vehicle, misses=[2])  # one missed frame after the second move

@@ -46,6 +46,13 @@ def test_classic_deadband_can_differ_from_epsilon() -> None:
         ClassicPlanner(deadband_px=-1.0)
 
 
+def test_classic_deadband_defaults_to_the_loops_stop_threshold() -> None:
+    at_boundary = observe(9.0, -9.0)  # within ε = 10, outside the stop threshold 8
+    assert ClassicPlanner().plan(at_boundary).action.is_none
+    with_threshold = Observation(at_boundary.image, at_boundary.detection, "center the gauge", 10.0, 8.0)
+    assert ClassicPlanner().plan(with_threshold).action == Action(XMove.RIGHT, ZMove.UP)
+
+
 def test_classic_without_a_detection_does_not_move() -> None:
     assert ClassicPlanner().plan(observe(None)).action.is_none
 

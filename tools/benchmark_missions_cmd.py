@@ -39,6 +39,9 @@ def main(argv: list[str]) -> int:
         help="truth: isolate the planners (sim only)",
     )
     parser.add_argument("--detector-checkpoint", help="image detector run folder (default: the shipped one)")
+    parser.add_argument(
+        "--fixed-moves", action="store_true", help="the paper's fixed move lengths instead of scaled ones"
+    )
     parser.add_argument("--parallel", type=int, default=1, help="worker processes (default: 1)")
     parser.add_argument("--json", type=Path, help="write the summary and every mission's row here")
     parser.add_argument("--report", type=Path, help="keep each mission's report.json under this folder")
@@ -49,7 +52,7 @@ def main(argv: list[str]) -> int:
             n=args.n, seed=args.seed, planners=tuple(p.strip() for p in args.planner.split(",") if p.strip()),
             vehicle=args.vehicle, max_steps=args.max_steps, epsilon_px=args.epsilon_px,
             checkpoint=args.checkpoint, detector=args.detector, parallel=args.parallel,
-            detector_checkpoint=args.detector_checkpoint,
+            detector_checkpoint=args.detector_checkpoint, scale_moves=not args.fixed_moves,
         )  # fmt: skip
     except ValueError as exc:
         parser.error(str(exc))

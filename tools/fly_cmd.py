@@ -41,12 +41,11 @@ def summary_lines(result: MissionResult) -> list[str]:
     """The few lines a person wants after a flight."""
     verdict = "PASS" if result.passed else "FAIL"
     outcome = result.outcome.replace("_", " ")
+    refined = f", {result.refinement_moves} of them boundary refinement" if result.refinement_moves else ""
     lines = [
         f"{verdict}  {result.name}: {outcome} after {result.steps} steps "
-        f"({result.moves} moves, {result.vehicle_s:.1f} s flown, {result.wall_s:.1f} s wall)"
+        f"({result.moves} moves{refined}; {result.vehicle_s:.1f} s of flight)"
     ]
-    if result.refinement_moves:
-        lines.append(f"      {result.refinement_moves} boundary refinement move(s) flown by the loop")
     truth, det = result.final_truth_offset_px, result.final_detector_offset_px
     parts = []
     if truth is not None:
