@@ -41,21 +41,19 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-import yaml
 from pydantic import (
-    AfterValidator,
     BaseModel,
     ConfigDict,
     Discriminator,
     Field,
     Tag,
-    ValidationError,
     field_validator,
     model_validator,
 )
 
 from flight.errors import ConnectionUrlError
 from flight.urls import validate_connection_url
+from sim_world.config_files import ConfigFileError, Range, read_yaml, validate_mapping
 
 PlannerName = Literal["latent", "classic", "random", "oracle"]
 PLANNER_NAMES: tuple[str, ...] = ("latent", "classic", "random", "oracle")
@@ -69,24 +67,8 @@ _MAVLINK_SCHEMES = ("udp://", "udpin://", "udpout://", "tcp://", "tcpin://", "tc
 _STREAM_SCHEMES = ("http://", "https://", "rtsp://", "file://")
 
 
-class MissionFileError(ValueError):
+class MissionFileError(ConfigFileError):
     """A mission file that cannot be flown; the message names the file and the field."""
-
-    def __init__(self, path: str | Path, field: str | None, reason: str) -> None:
-        self.path = str(path)
-        self.field = field
-        self.reason = reason
-        where = f"{self.path}: {field}" if field else self.path
-        super().__init__(f"{where}: {reason}")
-
-
-def _check_range(value: tuple[float, float]) -> tuple[float, float]:
-    if value[0] > value[1]:
-        raise ValueError(f"min {value[0]:g} > max {value[1]:g}")
-    return value
-
-
-Range = Annotated[tuple[float, float], AfterValidator(_check_range)]
 
 
 class _Strict(BaseModel):
@@ -308,62 +290,20 @@ class Mission(_Strict):
 _UNNAMED = ("fixed-start", "random-start")  # the `start` union's tags: not fields
 
 
-def _field_name(loc: tuple[int | str, ...]) -> str:
-    """Pydantic's error location as a dotted field name (`start.distance_m`, `tags[1]`)."""
-    name = ""
-    for part in loc:
-        if isinstance(part, int):
-            name += f"[{part}]"
-        elif part in _UNNAMED or part.startswith(("function-", "tuple[", "literal[")):
-            continue
-        else:
-            name += f".{part}" if name else part
-    return name or "(top level)"
-
-
-def _reason(error: dict[str, Any]) -> str:
-    if error["type"] == "extra_forbidden":
-        return "unknown key"
-    return str(error["msg"]).removeprefix("Value error, ")
-
-
 def parse_mission(
     data: object, source: str | Path = "<mission>", overrides: dict[str, Any] | None = None
 ) -> Mission:
     """Validate a parsed mapping (with top-level `overrides` applied); errors name `source` and the field."""
     if not isinstance(data, dict):
-        raise MissionFileError(
-            source, None, f"expected a mapping at the top level, got {type(data).__name__}"
-        )
-    merged = {**data, **(overrides or {})}
-    try:
-        return Mission.model_validate(merged)
-    except ValidationError as exc:
-        first = exc.errors()[0]
-        reason = _reason(first)
-        field = _field_name(tuple(first["loc"]))
-        if first["type"] == "value_error" and ": " in reason and not first["loc"]:
-            field, reason = reason.split(": ", 1)
-        raise MissionFileError(source, field, reason) from None
+        kind = type(data).__name__
+        raise MissionFileError(source, None, f"expected a mapping at the top level, got {kind}")
+    return validate_mapping(Mission, {**data, **(overrides or {})}, source, MissionFileError, _UNNAMED)
 
 
 def load_mission(path: str | Path, overrides: dict[str, Any] | None = None) -> Mission:
     """Read and validate a mission YAML file (see the module docstring for its fields)."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise MissionFileError(path, None, "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MissionFileError(path, None, f"cannot read: {exc}") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        raise MissionFileError(
-            path, None, f"YAML syntax error{where}: {getattr(exc, 'problem', None)}"
-        ) from None
+    data = read_yaml(path, MissionFileError)
     mission = parse_mission(data, path, overrides)
     if isinstance(mission.scene.config, str) and not Path(mission.scene.config).is_absolute():
         # A scene file is found relative to the mission file, so a suite folder can be moved as a whole.

@@ -13,8 +13,9 @@ import re
 from pathlib import Path
 from typing import Annotated, Literal
 
-import yaml
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
+
+from sim_world.config_files import ConfigFileError, check_range, read_yaml, validate_mapping
 
 TargetKind = Literal["gauge", "valve", "switchbox"]
 WallTexture = Literal["concrete", "brick", "painted_metal"]
@@ -26,22 +27,8 @@ TARGET_KINDS: tuple[TargetKind, ...] = ("gauge", "valve", "switchbox")
 _HEX_COLOUR = re.compile(r"^#[0-9a-fA-F]{6}$")
 
 
-class SceneConfigError(ValueError):
+class SceneConfigError(ConfigFileError):
     """A scene file that cannot be used; the message names the file and the field."""
-
-    def __init__(self, path: str | Path, field: str | None, reason: str) -> None:
-        self.path = str(path)
-        self.field = field
-        self.reason = reason
-        where = f"{self.path}: {field}" if field else self.path
-        super().__init__(f"{where}: {reason}")
-
-
-def _check_range(value: tuple[float, float]) -> tuple[float, float]:
-    lo, hi = value
-    if lo > hi:
-        raise ValueError(f"min {lo:g} > max {hi:g}")
-    return value
 
 
 def _within(value: tuple[float, float], lo: float, hi: float) -> tuple[float, float]:
@@ -57,9 +44,9 @@ def _check_colour(value: str) -> str:
     return value.lower()
 
 
-Range = Annotated[tuple[float, float], AfterValidator(_check_range)]
+Range = Annotated[tuple[float, float], AfterValidator(check_range)]
 """A closed interval `[min, max]` to draw a value from uniformly; `[x, x]` fixes it."""
-IntRange = Annotated[tuple[int, int], AfterValidator(_check_range)]
+IntRange = Annotated[tuple[int, int], AfterValidator(check_range)]
 """An inclusive integer interval `[min, max]`."""
 Colour = Annotated[str, AfterValidator(_check_colour)]
 """An sRGB colour as `'#rrggbb'`."""
@@ -205,46 +192,9 @@ DEFAULT_SCENE = SceneConfig()
 """The default family of scenes (the same as `scenes/default.yaml`)."""
 
 
-def _field_name(loc: tuple[int | str, ...]) -> str:
-    """Pydantic's error location as a dotted field name (`target.size_m`, `target.kinds[1]`)."""
-    name = ""
-    for part in loc:
-        if isinstance(part, int):
-            name += f"[{part}]"
-        elif not part.startswith(("function-", "tuple[", "literal[")):
-            name += f".{part}" if name else part
-    return name or "(top level)"
-
-
-def _reason(error: dict) -> str:
-    if error["type"] == "extra_forbidden":
-        return "unknown key"
-    if error["type"] in ("tuple_type", "list_type"):
-        return f"expected a list, got {error['input']!r}"
-    return str(error["msg"]).removeprefix("Value error, ")
-
-
 def parse_scene_config(data: object, source: str | Path = "<scene config>") -> SceneConfig:
-    """Validate an already-parsed mapping; errors name `source` and the field."""
-    if data is None:
-        data = {}
-    if not isinstance(data, dict):
-        raise SceneConfigError(
-            source, None, f"expected a mapping at the top level, got {type(data).__name__}"
-        )
-    try:
-        return SceneConfig.model_validate(data)
-    except ValidationError as exc:
-        # One line per field; an error on a list that only echoes an error on one of its items is dropped.
-        problems: list[tuple[str, str]] = []
-        for error in exc.errors():
-            field = _field_name(tuple(error["loc"]))
-            if not any(seen.startswith(field + "[") for seen, _ in problems):
-                problems.append((field, _reason(error)))
-        field, reason = problems[0]
-        if len(problems) > 1:
-            reason += " (also " + "; ".join(f"{f}: {r}" for f, r in problems[1:]) + ")"
-        raise SceneConfigError(source, field, reason) from None
+    """Validate an already-parsed mapping (empty means the defaults); errors name `source` and the field."""
+    return validate_mapping(SceneConfig, {} if data is None else data, source, SceneConfigError)
 
 
 def load_scene_config(path: str | Path) -> SceneConfig:
@@ -253,18 +203,5 @@ def load_scene_config(path: str | Path) -> SceneConfig:
     Raises `SceneConfigError` naming the file (and the field, where one is at fault) for a
     missing or unreadable file, a YAML syntax error, or a value that fails validation.
     """
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SceneConfigError(path, None, "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneConfigError(path, None, f"cannot read: {exc}") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or "invalid YAML"
-        raise SceneConfigError(path, None, f"YAML syntax error{where}: {problem}") from None
+    data = read_yaml(path, SceneConfigError)
     return parse_scene_config(data, path)
