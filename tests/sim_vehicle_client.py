@@ -120,6 +120,10 @@ class MavlinkTestClient:
             )
         )
 
+    def wait_text(self, fragment: str, timeout_s: float, after: float = 0.0) -> str:
+        """The first STATUSTEXT since `after` containing `fragment` (texts can trail the ack they explain)."""
+        return self.wait_for("STATUSTEXT", timeout_s, lambda m: fragment in m.text, after=after).text
+
     def texts(self, after: float = 0.0) -> list[str]:
         return [r.msg.text for r in self.since(after, "STATUSTEXT")]
 

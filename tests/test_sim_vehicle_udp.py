@@ -123,7 +123,7 @@ def test_arming_refused_during_boot_delay_then_accepted():
     with sim(14602, commander=CommanderConfig(arming_boot_delay_s=1.5)) as (client, vehicle):
         t0 = time.monotonic()
         assert client.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) == [TEMP_REJECTED]
-        assert any("Resolve system health failures" in t for t in client.texts(t0))
+        assert client.wait_text("Resolve system health failures", 2.0, after=t0)
         while client.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) != [ACCEPTED]:
             assert time.monotonic() - start < 6.0, "arming never accepted"
             time.sleep(0.2)
@@ -147,7 +147,7 @@ def test_params_round_trip_and_takeoff_reaches_mis_takeoff_alt_then_loiters():
         t0 = time.monotonic()
         client.send(M.MAVLink_param_set_message(1, 1, b"MIS_TAKEOFF_ALT", 1000.0, 9))  # out of range
         assert client.wait_for("PARAM_VALUE", 2.0, after=t0).param_value == 2.5
-        assert any("MIS_TAKEOFF_ALT" in t for t in client.texts(t0))
+        assert client.wait_text("MIS_TAKEOFF_ALT", 2.0, after=t0)
         t0 = time.monotonic()
         client.send(M.MAVLink_param_request_list_message(1, 1))
         time.sleep(0.3)
@@ -163,7 +163,7 @@ def test_params_round_trip_and_takeoff_reaches_mis_takeoff_alt_then_loiters():
         assert client.wait_for("LOCAL_POSITION_NED", 1.0, after=t_loiter).z == pytest.approx(-1.5, abs=0.1)
         assert client.wait_for("EXTENDED_SYS_STATE", 1.0).landed_state == M.MAV_LANDED_STATE_IN_AIR
         assert client.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0) == [DENIED]  # in the air
-        assert any("Takeoff complete" in t for t in client.texts())
+        assert client.wait_text("Takeoff complete", 2.0)
 
 
 def test_offboard_needs_setpoints_flies_body_velocity_and_fails_safe_on_loss():
