@@ -1,4 +1,4 @@
-"""Augmentation never changes a label: shear about the centre is checked per sample."""
+"""Augmentation: the paper's set never changes a label; label-exact geometry moves targets exactly."""
 
 import cv2
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from controller.actions import label_from_offset
-from controller.latent.augment import augment, colour_jitter, labels_of, shear, sheared_offsets
+from controller.latent.augment import augment, colour_jitter, geometric, labels_of, shear, sheared_offsets
 from controller.latent.config import AugmentConfig
 
 
@@ -66,5 +66,51 @@ def test_colour_jitter_stays_in_range_and_changes_pixels() -> None:
 
 def test_disabled_augmentation_is_identity() -> None:
     x = torch.rand(2, 3, 8, 8)
-    out = augment(x, torch.zeros(2, 2), (8, 8), 1.0, AugmentConfig(enabled=False), torch.Generator())
-    assert out is x
+    offsets = torch.zeros(2, 2)
+    out = augment(x, offsets, (8, 8), 1.0, AugmentConfig(enabled=False), torch.Generator())
+    assert out.images is x and out.offsets_px is offsets
+
+
+def test_paper_set_returns_offsets_unchanged() -> None:
+    x, offsets = torch.rand(4, 3, 32, 32), torch.tensor([[5.0, -7.0]] * 4)
+    out = augment(x, offsets, (32, 32), 2.0, AugmentConfig(), torch.Generator().manual_seed(0))
+    assert torch.equal(out.offsets_px, offsets) and not torch.equal(out.images, x)
+
+
+@pytest.mark.parametrize(("hflip", "scale"), [(False, 0.0), (True, 0.0), (False, 0.3)])
+def test_translation_flip_and_zoom_move_the_target_to_the_returned_offset(hflip: bool, scale: float) -> None:
+    size, eps = 96, 4.3
+    gen = torch.Generator().manual_seed(3)
+    drawn = torch.tensor(np.random.default_rng(0).uniform(-40, 40, (48, 2)), dtype=torch.float32)
+    images = torch.stack([_disc(size, u, v) for u, v in drawn.tolist()])
+    offsets = torch.tensor([_centroid_offset(i) for i in images])
+    cfg = AugmentConfig(
+        translate=0.25, translate_prob=1.0, translate_inset=0.15, hflip=hflip, scale=scale, shear_deg=3.0
+    )
+    out = geometric(images, offsets, (size, size), eps, cfg, gen)
+    after = torch.tensor([_centroid_offset(i) for i in out.images])
+    assert float((after - out.offsets_px).abs().max()) < 0.8  # the returned offset is where the disc is
+    assert float((out.offsets_px - offsets).abs().mean()) > 5.0  # targets really moved
+    limit = (1 - cfg.translate_inset) * size / 2  # 0.85: the whole disc stays in view
+    assert float(out.offsets_px.abs().max()) <= limit + 1e-4  # the target's centre stays inside
+    du = torch.minimum(
+        (out.offsets_px[:, 0] - offsets[:, 0]).abs(), (out.offsets_px[:, 0] + offsets[:, 0]).abs()
+    )
+    dv = (out.offsets_px[:, 1] - offsets[:, 1]).abs()
+    slack = 3.0 + scale * 40.0  # shear moves a target ≤ 3 px here, a zoom ≤ scale · |offset|
+    assert float(torch.maximum(du, dv).max()) <= 0.25 * size + slack  # shift limit, flip aside
+    mirrored = (torch.sign(out.offsets_px[:, 0]) != torch.sign(offsets[:, 0])).float().mean()
+    assert float(mirrored) > (0.3 if hflip else 0.0)
+
+
+def test_balanced_translation_spreads_labels_over_all_nine_actions() -> None:
+    size, eps = 224, 10.0
+    gen = torch.Generator().manual_seed(5)
+    offsets = torch.tensor([[60.0, -70.0]] * 900)  # one far sector: label up-right every time
+    x = torch.zeros(900, 3, 8, 8)
+    cfg = AugmentConfig(translate=0.4, translate_prob=1.0, shear_deg=0.0)
+    out = geometric(x, offsets, (size, size), eps, cfg, gen)
+    counts = torch.bincount(labels_of(out.offsets_px, eps), minlength=9)
+    assert int(counts.min()) > 60, counts.tolist()  # ≈ 100 each when every bin is reachable
+    near = ((out.offsets_px.abs() - eps).abs() < 5.0).any(dim=1).float().mean()
+    assert float(near) > 0.1  # many samples land next to an ε boundary

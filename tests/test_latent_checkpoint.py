@@ -20,7 +20,9 @@ def _tiny_checkpoint(folder: Path) -> tuple[LatentDynamicsModel, InstructionToke
     torch.manual_seed(0)
     tok = InstructionTokenizer.train(tokenizer_corpus())
     model = LatentDynamicsModel(
-        ModelConfig(image_size=48, base_width=8, coord_channels=True, vocab_size=tok.vocab_size)
+        ModelConfig(
+            image_size=48, base_width=8, coord_channels=True, pooling="flatten", vocab_size=tok.vocab_size
+        )
     )
     model.train()
     model.image_encoder(torch.rand(8, 3, 48, 48))  # move batch-norm running statistics off their init

@@ -4,9 +4,19 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 from pathlib import Path
 
-from controller.latent.config import DISTANCES, PRESET_NOTES, PRESETS, AugmentConfig, LossWeights, run_configs
+from controller.latent.config import (
+    DISTANCES,
+    FUSIONS,
+    POOLINGS,
+    PRESET_NOTES,
+    PRESETS,
+    AugmentConfig,
+    LossWeights,
+    run_configs,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -19,7 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--preset",
         choices=sorted(PRESETS),
         default="cpu",
-        help="; ".join(f"{k}: {v}" for k, v in PRESET_NOTES.items()),
+        help="; ".join(f"{k}: {v}" for k, v in PRESET_NOTES.items()).replace("%", "%%"),
     )
     p.add_argument("--distance", choices=DISTANCES, default=None, help="D: cosine (default), euclidean, both")
     p.add_argument("--instructions", choices=("fixed", "varied"), default=None, help="default varied")
@@ -27,7 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--loss-weights", type=LossWeights.parse, default=None, metavar="dir=1,rank=1,cons=1,reg=1"
     )
-    p.add_argument("--epochs", type=int, default=None, help="default 50")
+    p.add_argument("--epochs", type=int, default=None, help="default: the preset's (paper 50, cpu 30)")
     p.add_argument("--threads", type=int, default=None, help="torch threads (default 2)")
     p.add_argument("--image-size", type=int, default=None, help="override the preset's input size")
     p.add_argument("--width", type=int, default=None, help="override the preset's CNN base width")
@@ -38,7 +48,23 @@ def build_parser() -> argparse.ArgumentParser:
         "--lr-schedule", choices=("constant", "cosine"), default=None, help="override the preset's"
     )
     p.add_argument("--lr", type=float, default=None, help="Adam learning rate (default 3e-4)")
-    p.add_argument("--temperature", type=float, default=None, help="τ of the ranking loss (default 1.0)")
+    p.add_argument("--temperature", type=float, default=None, help="ranking τ (paper 1.0, cpu 0.1)")
+    p.add_argument("--pooling", choices=POOLINGS, default=None, help="E_img head (paper: gap)")
+    p.add_argument("--fusion", choices=FUSIONS, default=None, help="state fusion (paper: linear)")
+    p.add_argument("--batch-size", type=int, default=None, help="default 64")
+    p.add_argument(
+        "--translate",
+        type=float,
+        default=None,
+        help="label-exact shift, max fraction of the image per axis (0 = off, the paper's set)",
+    )
+    p.add_argument("--hflip", choices=("on", "off"), default=None, help="label-exact horizontal flip")
+    p.add_argument("--scale", type=float, default=None, help="label-exact zoom range (0 = off)")
+    p.add_argument("--hue", type=float, default=None, help="hue jitter, fraction of a full turn")
+    p.add_argument("--saturation", type=float, default=None, help="saturation jitter")
+    p.add_argument(
+        "--balance-kinds", choices=("on", "off"), default=None, help="equal sampling mass per target kind"
+    )
     p.add_argument("--no-augment", action="store_true", help="turn augmentation off")
     p.add_argument("--epsilon-px", type=float, default=None, help="ε in dataset pixels (default 10 at 224)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -53,6 +79,8 @@ def main(argv: list[str]) -> int:
             ("image_size", args.image_size),
             ("base_width", args.width),
             ("coord_channels", None if args.coord_channels is None else args.coord_channels == "on"),
+            ("pooling", args.pooling),
+            ("fusion", args.fusion),
         )
         if v is not None
     }
@@ -63,6 +91,23 @@ def main(argv: list[str]) -> int:
         train_over["learning_rate"] = args.lr
     if args.temperature is not None:
         train_over["temperature"] = args.temperature
+    if args.batch_size is not None:
+        train_over["batch_size"] = args.batch_size
+    aug_over: dict[str, object] = {}
+    if args.translate is not None:
+        aug_over["translate"] = args.translate
+    if args.hflip is not None:
+        aug_over["hflip"] = args.hflip == "on"
+    if args.scale is not None:
+        aug_over["scale"] = args.scale
+    if args.hue is not None:
+        aug_over["hue"] = args.hue
+    if args.saturation is not None:
+        aug_over["saturation"] = args.saturation
+    if args.balance_kinds is not None:
+        train_over["balance_kinds"] = args.balance_kinds == "on"
+    if aug_over:
+        train_over["augment"] = replace(PRESETS[args.preset].train.augment, **aug_over)
     if args.no_augment:
         train_over["augment"] = AugmentConfig(enabled=False)
     if args.epsilon_px is not None:

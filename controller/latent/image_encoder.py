@@ -4,6 +4,11 @@ Stem 7×7/2 conv + BN + ReLU + 3×3/2 max-pool, four stages of two basic residua
 blocks with widths w·[1, 2, 4, 8] (w = 64 in the paper), global average pool,
 linear projection to d = 128. Optional coordinate planes (u, v ∈ [-1, 1]) are
 appended to the RGB input when `coord_channels` is on (cpu preset).
+
+The head is switchable (`ModelConfig.pooling`): "gap" is the paper's; global average
+pooling discards where a feature fired, and the label is a statement about exactly
+that, so "flatten" (linear over the whole final map) and "keypoints" (spatial
+softmax: per channel the expected (u, v) under a softmax over positions) keep it.
 """
 
 from __future__ import annotations
@@ -39,9 +44,17 @@ class ImageEncoder(nn.Module):
     MEAN = (0.485, 0.456, 0.406)  # per-channel normalisation constants (ImageNet convention)
     STD = (0.229, 0.224, 0.225)
 
-    def __init__(self, out_dim: int = 128, base_width: int = 64, coord_channels: bool = False) -> None:
+    def __init__(
+        self,
+        out_dim: int = 128,
+        base_width: int = 64,
+        coord_channels: bool = False,
+        pooling: str = "gap",
+        image_size: int = 224,
+    ) -> None:
         super().__init__()
         self.coord_channels = coord_channels
+        self.pooling = pooling
         c_in = 5 if coord_channels else 3
         w = base_width
         self.stem = nn.Sequential(
@@ -57,7 +70,9 @@ class ImageEncoder(nn.Module):
             stages.append(nn.Sequential(BasicBlock(c, c_out, stride), BasicBlock(c_out, c_out, 1)))
             c = c_out
         self.stages = nn.Sequential(*stages)
-        self.proj = nn.Linear(c, out_dim)
+        side = _final_side(image_size)  # S/32 rounded up, as the strided convolutions give it
+        head_in = {"gap": c, "flatten": c * side * side, "keypoints": 3 * c}[pooling]
+        self.proj = nn.Linear(head_in, out_dim)
         self.register_buffer("mean", torch.tensor(self.MEAN).view(1, 3, 1, 1), persistent=False)
         self.register_buffer("std", torch.tensor(self.STD).view(1, 3, 1, 1), persistent=False)
 
@@ -67,8 +82,29 @@ class ImageEncoder(nn.Module):
             x = torch.cat([x, _coord_planes(x)], dim=1)  # (B, 5, S, S)
         x = self.stem(x)  # (B, w, S/4, S/4)
         x = self.stages(x)  # (B, 8w, S/32, S/32)
-        x = x.mean(dim=(2, 3))  # (B, 8w) global average pool
-        return self.proj(x)  # (B, d)
+        if self.pooling == "flatten":
+            return self.proj(x.flatten(1))  # (B, 8w·s·s) → (B, d)
+        pooled = x.mean(dim=(2, 3))  # (B, 8w) global average pool
+        if self.pooling == "keypoints":
+            pooled = torch.cat([pooled, _spatial_softmax(x)], dim=1)  # (B, 8w + 2·8w)
+        return self.proj(pooled)  # (B, d)
+
+
+def _final_side(image_size: int) -> int:
+    side = image_size
+    for _ in range(5):  # stem conv, max-pool, stages 2–4: each stride 2 with padding
+        side = (side + 1) // 2
+    return side
+
+
+def _spatial_softmax(x: torch.Tensor) -> torch.Tensor:
+    """(B, C, H, W) → (B, 2C): per channel, the expected (u, v) ∈ [-1, 1]² under softmax over H·W."""
+    b, c, h, w = x.shape
+    weights = torch.softmax(x.flatten(2), dim=-1).view(b, c, h, w)
+    planes = _coord_planes(x[:, :1])  # (B, 2, H, W)
+    u = (weights * planes[:, :1]).sum(dim=(2, 3))  # (B, C)
+    v = (weights * planes[:, 1:]).sum(dim=(2, 3))
+    return torch.cat([u, v], dim=1)
 
 
 def _coord_planes(x: torch.Tensor) -> torch.Tensor:

@@ -31,7 +31,9 @@ class LatentDynamicsModel(nn.Module):
         super().__init__()
         self.config = config
         d = config.latent_dim
-        self.image_encoder = ImageEncoder(d, config.base_width, config.coord_channels)
+        self.image_encoder = ImageEncoder(
+            d, config.base_width, config.coord_channels, config.pooling, config.image_size
+        )
         self.text_encoder = TextEncoder(
             config.vocab_size,
             d,
@@ -42,6 +44,9 @@ class LatentDynamicsModel(nn.Module):
             config.max_tokens,
         )
         self.fuse = nn.Linear(2 * d, d)  # concat(E_img, E_inst) → z_s
+        if config.fusion == "gated":  # + (A·E_img) ⊙ (B·E_inst)
+            self.fuse_img = nn.Linear(d, d, bias=False)
+            self.fuse_text = nn.Linear(d, d)
         self.action_x = nn.Embedding(3, config.action_dim)  # E_act, X axis
         self.action_z = nn.Embedding(3, config.action_dim)  # E_act, Z axis
         h = config.dynamics_hidden
@@ -72,7 +77,10 @@ class LatentDynamicsModel(nn.Module):
 
     def fuse_state(self, img_emb: torch.Tensor, text_emb: torch.Tensor) -> torch.Tensor:
         """(B, d), (B, d) → (B, d) z_s (also used for the goal prototype z*)."""
-        return self.fuse(torch.cat([img_emb, text_emb], dim=-1))
+        z = self.fuse(torch.cat([img_emb, text_emb], dim=-1))
+        if self.config.fusion == "gated":
+            z = z + self.fuse_img(img_emb) * self.fuse_text(text_emb)
+        return z
 
     def action_embeddings(self) -> torch.Tensor:
         """(9, 32) z_a of every joint action."""

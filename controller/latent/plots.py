@@ -10,6 +10,7 @@ import matplotlib
 matplotlib.use("Agg")  # files only; never a display
 import matplotlib.pyplot as plt
 import numpy as np
+from PIL import Image
 
 
 def plot_curves(history: Sequence[dict[str, float]], path: Path) -> None:
@@ -75,5 +76,9 @@ def plot_gallery(images: Sequence[np.ndarray], captions: Sequence[str], path: Pa
         ax.plot([w / 2], [h / 2], "r+", ms=10)
         ax.set_title(cap, fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=72)
     plt.close(fig)
+    # Camera noise makes photographic PNGs large; a 128-colour palette keeps the gallery small.
+    with Image.open(path) as img:
+        small = img.convert("RGB").quantize(colors=128)
+    small.save(path, optimize=True)

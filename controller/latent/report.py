@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from controller.actions import Action
+from controller.latent.config import PRESET_NOTES, PRESETS
 from controller.latent.data import load_index, read_image
 from controller.latent.plots import plot_gallery, plot_heatmaps
 from controller.latent.reproduce import BY_NAME, MAIN, TABLE2, TABLE3
@@ -37,7 +38,7 @@ ABLATION_LABELS = {
     "no-dir": "No Directional Loss",
     "no-rank": "No Ranking Loss",
 }
-GALLERY_MAX = 18
+GALLERY_MAX = 12
 
 
 def _stat(values: Sequence[float]) -> str:
@@ -87,6 +88,46 @@ def _table3(groups: dict[str, list[dict[str, Any]]]) -> list[str]:
                 f"| {ABLATION_LABELS[name]} | {_stat([r['heldout']['rank1'] for r in runs])} "
                 f"| {PAPER_TABLE3[name]} |"
             )
+    return lines
+
+
+def _flat(prefix: str, value: Any) -> dict[str, Any]:
+    if isinstance(value, dict):
+        out: dict[str, Any] = {}
+        for k, v in value.items():
+            out.update(_flat(f"{prefix}.{k}" if prefix else k, v))
+        return out
+    return {prefix: value}
+
+
+def _settings(preset: str) -> list[str]:
+    """The preset's notes and every setting in which it differs from the paper preset."""
+    ours, paper = PRESETS[preset], PRESETS["paper"]
+    a = _flat("", {"model": ours.model.to_dict(), "train": ours.train.to_dict()})
+    b = _flat("", {"model": paper.model.to_dict(), "train": paper.train.to_dict()})
+    lines = [f"Preset `{preset}`: {PRESET_NOTES[preset]}", ""]
+    diff = [k for k in a if a[k] != b.get(k)]
+    if diff:
+        lines += ["| setting | this preset | paper preset |", "| --- | --- | --- |"]
+        lines += [f"| `{k}` | {a[k]} | {b.get(k)} |" for k in diff]
+    else:
+        lines.append("All settings are the paper preset's.")
+    return lines
+
+
+def _per_kind(runs: Sequence[dict[str, Any]], data_dir: Path) -> list[str]:
+    """Held-out rank-1 per target kind, mean ± std over seeds."""
+    kind_of = {r.id: r.target_kind for r in load_index(data_dir).rows}
+    per: dict[str, list[float]] = defaultdict(list)
+    for run in runs:
+        ev = run["heldout"]
+        kinds = np.array([kind_of.get(i, "?") for i in ev["ids"]])
+        ok = np.asarray(ev["predictions"]) == np.asarray(ev["labels"])
+        for kind in sorted(set(kinds)):
+            per[kind].append(float(ok[kinds == kind].mean()))
+    lines = ["| target kind | test images | rank-1 (v+t) |", "| --- | --- | --- |"]
+    n_of = {k: int(sum(kind_of.get(i) == k for i in runs[0]["heldout"]["ids"])) for k in per}
+    lines += [f"| {k} | {n_of[k]} | {_stat(v)} |" for k, v in per.items()]
     return lines
 
 
@@ -146,6 +187,10 @@ def write_report(
         f"Training time per run: mean {np.mean(seconds):.0f} s, max {np.max(seconds):.0f} s "
         f"({len(results)} runs).",
         "",
+        "## Settings",
+        "",
+        *_settings(preset),
+        "",
         "## Table 2: instructions × distance",
         "",
         *_table2(groups),
@@ -161,6 +206,10 @@ def write_report(
         lines += [
             f"Held-out minus training-style instructions ({MAIN}): "
             f"{-np.mean(gap):+.2f} points (per seed: {', '.join(f'{-g:+.2f}' for g in gap)}).",
+            "",
+            "Per target kind:",
+            "",
+            *_per_kind(main_runs, data_dir),
             "",
             "## Figure 3: accuracy over the target's offset from the image centre",
             "",

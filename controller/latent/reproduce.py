@@ -11,13 +11,13 @@ from __future__ import annotations
 import json
 import logging
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
-from controller.latent.config import LossWeights, run_configs
+from controller.latent.config import PRESETS, LossWeights, run_configs
 
 log = logging.getLogger(__name__)
 EVAL_FILE = "eval.json"
@@ -29,7 +29,11 @@ class Experiment:
     table: str  # "table2" or "table3"
     instructions: str
     distance: str
-    weights: LossWeights = field(default_factory=LossWeights)
+    zeroed: tuple[str, ...] = ()  # loss terms switched off (ablations); the rest keep the preset's weights
+
+    def weights(self, preset: str) -> LossWeights:
+        """The preset's loss weights with this experiment's ablated terms set to 0."""
+        return replace(PRESETS[preset].train.weights, **dict.fromkeys(self.zeroed, 0.0))
 
 
 TABLE2 = tuple(
@@ -38,9 +42,9 @@ TABLE2 = tuple(
     for dist in ("cosine", "euclidean", "both")
 )
 TABLE3 = (
-    Experiment("no-cons-reg", "table3", "varied", "cosine", LossWeights(cons=0.0, reg=0.0)),
-    Experiment("no-dir", "table3", "varied", "cosine", LossWeights(dir=0.0)),
-    Experiment("no-rank", "table3", "varied", "cosine", LossWeights(rank=0.0)),
+    Experiment("no-cons-reg", "table3", "varied", "cosine", ("cons", "reg")),
+    Experiment("no-dir", "table3", "varied", "cosine", ("dir",)),
+    Experiment("no-rank", "table3", "varied", "cosine", ("rank",)),
 )
 MAIN = "varied-cosine"  # the configuration of the targets, Figure 3 and the gallery
 EXPERIMENT_SETS = {"main": ("varied-cosine",), "table2": tuple(e.name for e in TABLE2)}
@@ -76,7 +80,7 @@ def run_job(job: Job) -> dict[str, Any]:
         distance=exp.distance,
         instructions=exp.instructions,
         seed=job.seed,
-        weights=exp.weights,
+        weights=exp.weights(job.preset),
         epochs=job.epochs,
         threads=job.threads,
     )

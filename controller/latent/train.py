@@ -20,7 +20,7 @@ from typing import Any
 import torch
 from tqdm import tqdm
 
-from controller.latent.augment import augment
+from controller.latent.augment import augment, label_exact, labels_of
 from controller.latent.checkpoint import save_checkpoint
 from controller.latent.config import ModelConfig, TrainConfig
 from controller.latent.data import ImageSet, load_images, load_index, split_train_val, to_float
@@ -118,14 +118,13 @@ def train(
     bar = tqdm(range(1, cfg.epochs + 1), desc="epochs", disable=not progress)
     for epoch in bar:
         model.train()
-        order = torch.randperm(len(train_set), generator=gen)
+        order = _epoch_order(train_set.kinds, cfg.balance_kinds, gen)
         sums = dict.fromkeys(("total", "dir", "rank", "cons", "reg"), 0.0)
         correct = 0
         for b in range(steps_per_epoch):
             idx = order[b * cfg.batch_size : (b + 1) * cfg.batch_size]
             g_idx = torch.randint(len(goals), (cfg.goal_sample,), generator=gen)
-            labels = train_set.labels[idx]
-            terms, d_all = _step(model, cfg, train_set, goals, idx, g_idx, sampler, size_px, eps, gen)
+            terms, d_all, labels = _step(model, cfg, train_set, goals, idx, g_idx, sampler, size_px, eps, gen)
             optimiser.zero_grad(set_to_none=True)
             terms.total.backward()
             optimiser.step()
@@ -173,6 +172,17 @@ def train(
     return result
 
 
+def _epoch_order(kinds: list[str], balance: bool, gen: torch.Generator) -> torch.Tensor:
+    """One epoch's sample order: a permutation, or (balance) len(kinds) draws with equal mass per kind."""
+    n = len(kinds)
+    if not balance:
+        return torch.randperm(n, generator=gen)
+    names = sorted(set(kinds))
+    kind_idx = torch.tensor([names.index(k) for k in kinds])
+    weights = 1.0 / torch.bincount(kind_idx).float()[kind_idx]  # (N,)
+    return torch.multinomial(weights, n, replacement=True, generator=gen)
+
+
 def _brief(row: dict[str, float]) -> str:
     return " ".join(f"{k}={v:.4g}" for k, v in row.items())
 
@@ -188,19 +198,23 @@ def _step(
     size_px: tuple[int, int],
     eps: float,
     gen: torch.Generator,
-) -> tuple[LossTerms, torch.Tensor]:
-    """Forward one batch and return its loss terms and (B, 9) distances."""
+) -> tuple[LossTerms, torch.Tensor, torch.Tensor]:
+    """Forward one batch; return its loss terms, (B, 9) distances and the (B,) labels it was scored on.
+
+    With label-exact geometry the batch's labels are recomputed from the moved offsets; the goal
+    images of the prototype get only the paper's label-preserving set (they must stay centred).
+    """
     b = len(idx)
-    images = torch.cat([data.images[idx], goals.images[g_idx]])  # (B + G, 3, S, S) uint8
-    offsets = torch.cat([data.offsets[idx], goals.offsets[g_idx]])
-    x = augment(to_float(images), offsets, size_px, eps, cfg.augment, gen)
-    img = model.encode_images(x)  # (B + G, d)
+    batch = augment(to_float(data.images[idx]), data.offsets[idx], size_px, eps, cfg.augment, gen)
+    goal_cfg = replace(cfg.augment, translate=0.0, hflip=False)
+    goal_x = augment(to_float(goals.images[g_idx]), goals.offsets[g_idx], size_px, eps, goal_cfg, gen).images
+    labels = labels_of(batch.offsets_px, eps) if label_exact(cfg.augment) else data.labels[idx]
+    img = model.encode_images(torch.cat([batch.images, goal_x]))  # (B + G, d), one batch-norm batch
     goal_mean = img[b:].mean(dim=0, keepdim=True)  # (1, d): this step's goal image mean
     text = model.encode_text(sampler.sample([data.kinds[i] for i in idx.tolist()], gen))  # (B, d)
     z_s = model.fuse_state(img[:b], text)  # (B, d)
     z_goal = model.fuse_state(goal_mean.expand(b, -1), text)  # (B, d)
     d_all, deltas = model.score(z_s, z_goal)  # (B, 9), (B, 9, d)
-    labels = data.labels[idx]
     rows = torch.arange(b)
     terms = total_loss(
         d_now=distance(z_s, z_goal, model.config.distance),
@@ -212,4 +226,4 @@ def _step(
         margin=cfg.margin,
         temperature=cfg.temperature,
     )
-    return terms, d_all
+    return terms, d_all, labels
