@@ -74,7 +74,8 @@ class CollectConfig:
     epsilon_px: float | None = None
     """None: the default ε for `size_px`."""
     workers: int = 1
-    images_per_scene: int = 25
+    images_per_scene: int = 5
+    """A new scene every this many images: many scenes (340 for the paper sizes) generalise far better."""
     distance_m: tuple[float, float] = (1.2, 3.5)
     """Depth of the target centre along the optical axis."""
     yaw_deg: float = 15.0

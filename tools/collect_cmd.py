@@ -30,7 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-empty", type=int, default=100, help="images without the target in view (default 100)")
     p.add_argument("--size", type=int, default=224, help="square image size in pixels (default 224)")
     p.add_argument("--epsilon-px", type=float, default=None, help="ε in pixels (default 10 at 224, scaled)")
-    p.add_argument("--images-per-scene", type=int, default=25, help="images per scene (default 25)")
+    p.add_argument("--images-per-scene", type=int, default=5, help="images per scene (default 5)")
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes (default: all CPUs)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
