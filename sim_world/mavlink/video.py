@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import math
 import multiprocessing as mp
+import os
 import signal
 import time
 from dataclasses import dataclass
@@ -148,7 +149,10 @@ def _serve(
             conn.send(("ready", server.stream_url))
             period = 1.0 / config.fps
             next_t = time.monotonic()
-            while not stop.is_set():
+            parent = os.getppid()
+            # A vehicle killed outright never sets `stop` (and `daemon=True` only acts on a normal
+            # exit): re-parenting means it is gone, so stop rather than render for nobody forever.
+            while not stop.is_set() and os.getppid() == parent:
                 t0 = time.monotonic()
                 with pose.get_lock():
                     values = list(pose)
