@@ -17,7 +17,7 @@ Boundary refinement: near the boundary a planner may choose "no move" on an axis
 (or on both) while the detector still sees the target outside the stop threshold
 on it, e.g. the oracle judging by truth, or a learned planner whose own sense of ε
 is a pixel or two wider. Where the detector's offset on such an axis lies in the
-boundary band (stop threshold, ε + `stop_margin_px`], the loop flies the minimum
+boundary band (stop threshold, ε + 2 × `stop_margin_px`], the loop flies the minimum
 move (`min_move_m`) towards the detector's offset on that axis (beside the
 planner's move on the other axis, if any), at most `max_refinements` steps per run.
 A "no move" at all is refined only when no axis lies beyond the band. Each such
@@ -364,7 +364,7 @@ class CentringLoop:
         """(right, up) signs of the boundary refinement for `action`, or None where none applies.
 
         An axis is refined where the planner chose no move on it while the detector's offset on
-        it lies in the boundary band (stop threshold, ε + margin]; a "no move" at all is refined
+        it lies in the boundary band (stop threshold, ε + 2 × margin]; a "no move" at all is refined
         only if no axis lies beyond the band (else the planner is wrong, not the boundary: a stall).
         """
         cfg = self.config
@@ -373,7 +373,7 @@ class CentringLoop:
         if state.refinements >= cfg.max_refinements:
             return None
         threshold = record.stop_threshold_px
-        band_px = 2.0 * cfg.epsilon_px - threshold  # ε + the stopping margin
+        band_px = cfg.epsilon_px + 2.0 * (cfg.epsilon_px - threshold)  # ε + twice the stopping margin
         if action.is_none and max(abs(o) for o in record.offset_px) > band_px:
             return None
         du, dv = record.offset_px
