@@ -49,7 +49,10 @@ def test_training_beats_chance_on_held_out_images(synthetic: Path, tmp_path: Pat
     chance = float(torch.bincount(test_labels).max()) / len(test_labels)  # always say the majority class
     ev = evaluate_checkpoint(tmp_path / "run", synthetic, "heldout")
     assert ev.n == 120
-    assert ev.rank1 >= max(0.4, 1.6 * chance), (ev.rank1, chance)  # chance 0.25 here; a broken model stays near it
+    assert ev.rank1 >= max(0.4, 1.6 * chance), (
+        ev.rank1,
+        chance,
+    )  # chance 0.25 here; a broken model stays near it
     assert min(ev.x_accuracy, ev.z_accuracy) >= 0.7
 
 
