@@ -63,14 +63,20 @@ def is_positive(row: dict[str, Any]) -> bool:
     return bool(row["in_view"]) and row["bbox_px"] is not None and row["split"] != "empty"
 
 
-def read_rgb(path: Path, size: int) -> np.ndarray:
-    """An image file as RGB uint8 (size, size, 3); DatasetError naming the file if unreadable."""
+def read_image_rgb(path: Path) -> np.ndarray:
+    """An image file as RGB uint8 in its own size; DatasetError naming the file if unreadable."""
     bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if bgr is None:
         raise DatasetError(f"{path}: not a readable image")
-    if bgr.shape[:2] != (size, size):
-        bgr = cv2.resize(bgr, (size, size), interpolation=cv2.INTER_AREA)
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def read_rgb(path: Path, size: int) -> np.ndarray:
+    """An image file as RGB uint8 (size, size, 3); DatasetError naming the file if unreadable."""
+    rgb = read_image_rgb(path)
+    if rgb.shape[:2] != (size, size):
+        rgb = cv2.resize(rgb, (size, size), interpolation=cv2.INTER_AREA)
+    return rgb
 
 
 def load_samples(

@@ -22,12 +22,12 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 from tqdm import tqdm
 
 from perception.centring import default_epsilon_px, is_centred
 from perception.detector import Detector
+from perception.detector_data import read_image_rgb
 from perception.types import Detection
 from sim_world.dataset import DatasetError, load_manifest
 
@@ -192,11 +192,3 @@ def evaluate_on_dataset(
     width, height = int(meta["camera"]["width"]), int(meta["camera"]["height"])
     eps = float(meta.get("epsilon_px") or default_epsilon_px(width))
     return evaluate_detections(chosen, detections, width, height, eps)
-
-
-def read_image_rgb(path: Path) -> np.ndarray:
-    """An image file as RGB uint8 in its own size; DatasetError naming the file if unreadable."""
-    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if bgr is None:
-        raise DatasetError(f"{path}: not a readable image")
-    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
