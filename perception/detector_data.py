@@ -17,13 +17,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import torch
 from tqdm import tqdm
 
 from perception.detector_model import EDGE_SCALE_PX, STRIDE
-from sim_world.dataset import DatasetError, load_manifest
+from sim_world.dataset import DatasetError, load_manifest, read_rgb
 
 log = logging.getLogger(__name__)
 
@@ -61,22 +60,6 @@ class DetectorSamples:
 def is_positive(row: dict[str, Any]) -> bool:
     """The detector should report this row's target: centre in the image and a visible box."""
     return bool(row["in_view"]) and row["bbox_px"] is not None and row["split"] != "empty"
-
-
-def read_image_rgb(path: Path) -> np.ndarray:
-    """An image file as RGB uint8 in its own size; DatasetError naming the file if unreadable."""
-    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if bgr is None:
-        raise DatasetError(f"{path}: not a readable image")
-    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-
-
-def read_rgb(path: Path, size: int) -> np.ndarray:
-    """An image file as RGB uint8 (size, size, 3); DatasetError naming the file if unreadable."""
-    rgb = read_image_rgb(path)
-    if rgb.shape[:2] != (size, size):
-        rgb = cv2.resize(rgb, (size, size), interpolation=cv2.INTER_AREA)
-    return rgb
 
 
 def load_samples(

@@ -27,9 +27,8 @@ from tqdm import tqdm
 
 from perception.centring import default_epsilon_px, is_centred
 from perception.detector import Detector
-from perception.detector_data import read_image_rgb
 from perception.types import Detection
-from sim_world.dataset import DatasetError, load_manifest
+from sim_world.dataset import DatasetError, load_manifest, read_image_rgb
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,9 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, TextIO
 
+import cv2
+import numpy as np
+
 logger = logging.getLogger(__name__)
 
 GENERATOR_VERSION = "sim_world.collect/2"  # 2: floor collision plane no longer drawn over the floor
@@ -53,6 +56,22 @@ _META_FIELDS = ("generator_version", "seed", "camera", "scene_config", "counts")
 
 class DatasetError(ValueError):
     """A dataset folder that cannot be read; the message names the file (and line or field)."""
+
+
+def read_image_rgb(path: Path) -> np.ndarray:
+    """A dataset image as RGB uint8 in its own size; DatasetError naming the file if unreadable."""
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise DatasetError(f"{path}: not a readable image")
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def read_rgb(path: Path, size: int) -> np.ndarray:
+    """A dataset image as RGB uint8 (size, size, 3), area-resized; DatasetError if unreadable."""
+    rgb = read_image_rgb(path)
+    if rgb.shape[:2] != (size, size):
+        rgb = cv2.resize(rgb, (size, size), interpolation=cv2.INTER_AREA)
+    return rgb
 
 
 def write_json_atomic(path: Path, data: dict[str, Any]) -> None:

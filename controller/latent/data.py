@@ -15,7 +15,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import torch
 from tqdm import tqdm
@@ -24,7 +23,7 @@ from controller.actions import label_from_offset
 from controller.latent.config import default_epsilon_px
 from controller.latent.errors import DatasetError
 from sim_world.dataset import DatasetError as ManifestError
-from sim_world.dataset import load_manifest
+from sim_world.dataset import load_manifest, read_rgb
 
 log = logging.getLogger(__name__)
 
@@ -114,13 +113,11 @@ def _row(raw: dict[str, Any], root: Path) -> Row:
 
 
 def read_image(path: Path, size: int) -> np.ndarray:
-    """Decode a PNG as RGB uint8 and resize it to size × size (area interpolation)."""
-    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if bgr is None:
-        raise DatasetError(f"cannot decode image {path}")
-    if bgr.shape[:2] != (size, size):
-        bgr = cv2.resize(bgr, (size, size), interpolation=cv2.INTER_AREA)
-    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    """Decode a dataset PNG as RGB uint8 resized to size × size (`sim_world.dataset.read_rgb`)."""
+    try:
+        return read_rgb(path, size)
+    except ManifestError as exc:
+        raise DatasetError(str(exc)) from exc
 
 
 def load_images(
