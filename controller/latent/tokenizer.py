@@ -1,23 +1,24 @@
 """DistilBERT-style instruction tokenizer: lower-cased WordPiece, [CLS] … [SEP], 50 tokens at most.
 
-Built with the `tokenizers` library from the project's own instruction corpus (no hub
-download) and saved as `vocab.txt` + `tokenizer.json` in the checkpoint folder. The
-initial alphabet holds every lower-case letter, digit and common punctuation mark (both
-word-initial and as "##" continuation pieces) so that an unseen word is split into known
-pieces instead of becoming [UNK].
+A `tokenizers` WordPiece model with BERT's normaliser and pre-tokeniser; the vocabulary is
+counted from the project's own instruction corpus (no hub download), deterministically,
+and saved as `vocab.txt` + `tokenizer.json` in the checkpoint folder. The alphabet holds
+every lower-case letter, digit and common punctuation mark (both word-initial and as "##"
+continuation pieces) so that an unseen word is split into known pieces instead of
+becoming [UNK].
 """
 
 from __future__ import annotations
 
 import json
 import string
+from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
 import torch
 from tokenizers import Tokenizer, decoders, normalizers, pre_tokenizers, processors
 from tokenizers.models import WordPiece
-from tokenizers.trainers import WordPieceTrainer
 
 from controller.latent.errors import CheckpointError, InstructionError
 
@@ -42,19 +43,42 @@ class InstructionTokenizer:
     def train(
         cls, corpus: Sequence[str], vocab_size: int = 5000, max_tokens: int = 50
     ) -> InstructionTokenizer:
-        """Build a WordPiece vocabulary (at most `vocab_size` entries) from `corpus`."""
-        tok = _empty_tokenizer(WordPiece(unk_token="[UNK]"))
+        """Build a WordPiece vocabulary (at most `vocab_size` entries) from `corpus`, deterministically.
+
+        Order: the special tokens; every alphabet symbol word-initial, then as a "##" piece; the
+        corpus's words (normalised and split as at encoding time); then the pieces that let an
+        unseen word reuse known parts: word-initial stems (≥ 3 letters) and "##" endings (2–5
+        letters) that at least two distinct corpus words share. Within each group by falling
+        count, ties alphabetical. WordPiece's longest-match-first encoding keeps every corpus
+        word whole and spells an unseen one from stems and endings ("centering" → center ##ing).
+        (The library's `WordPieceTrainer` breaks merge ties in hash order: two runs on the same
+        corpus gave 300 and 301 tokens with different ids, so a seed did not reproduce a run.)
+        """
+        probe = _empty_tokenizer(WordPiece(vocab={"[UNK]": 0}, unk_token="[UNK]"))
+        words: Counter[str] = Counter()
+        for line in corpus:
+            text = probe.normalizer.normalize_str(line)  # type: ignore[union-attr]
+            words.update(word for word, _ in probe.pre_tokenizer.pre_tokenize_str(text))  # type: ignore[union-attr]
+        stems: Counter[str] = Counter()
+        endings: Counter[str] = Counter()
+        for word in words:
+            if word.isalpha():
+                stems.update(word[:n] for n in range(3, len(word)))
+                endings.update("##" + word[-n:] for n in range(2, min(5, len(word) - 1) + 1))
         alphabet = list(string.ascii_lowercase + string.digits + string.punctuation)
-        trainer = WordPieceTrainer(
-            vocab_size=vocab_size,
-            min_frequency=1,
-            special_tokens=list(SPECIAL_TOKENS),
-            initial_alphabet=alphabet,
-            continuing_subword_prefix="##",
-        )
-        # One line of two-letter words makes every symbol also exist as a continuation piece "##c".
-        coverage = " ".join("a" + c for c in alphabet if c.isalnum())
-        tok.train_from_iterator([*corpus, coverage], trainer=trainer)
+        tokens = [*SPECIAL_TOKENS, *alphabet, *("##" + c for c in alphabet)]
+        if len(tokens) > vocab_size:
+            raise ValueError(
+                f"vocab_size {vocab_size} is below the {len(tokens)} special and alphabet tokens"
+            )
+        seen = set(tokens)
+        shared = (Counter({k: v for k, v in group.items() if v >= 2}) for group in (stems, endings))
+        for group in (words, *shared):
+            for token, _ in sorted(group.items(), key=lambda kv: (-kv[1], kv[0])):
+                if len(tokens) < vocab_size and token not in seen:
+                    tokens.append(token)
+                    seen.add(token)
+        tok = _empty_tokenizer(WordPiece(vocab={t: i for i, t in enumerate(tokens)}, unk_token="[UNK]"))
         _add_post_processor(tok)
         return cls(tok, max_tokens)
 
