@@ -1,5 +1,8 @@
 """Instruction corpora and the WordPiece tokenizer: truncation, empty input, save/load."""
 
+import random
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -27,6 +30,34 @@ def test_corpora_sizes_and_held_out_disjoint() -> None:
 def test_lower_cased_wordpiece_with_cls_sep(tokenizer: InstructionTokenizer) -> None:
     assert tokenizer.tokens("Center the GAUGE.") == ["[CLS]", "center", "the", "gauge", ".", "[SEP]"]
     assert tokenizer.vocab_size < 5000
+
+
+def test_vocabulary_is_the_same_in_every_process_and_for_any_corpus_order(
+    tokenizer: InstructionTokenizer, tmp_path: Path
+) -> None:
+    # Hash-ordered tie-breaking (the library's WordPieceTrainer) gave another vocabulary in some
+    # processes, so a training seed did not reproduce its run.
+    tokenizer.save(tmp_path)
+    code = (
+        "import sys; from pathlib import Path;"
+        "from controller.latent.instructions import tokenizer_corpus;"
+        "from controller.latent.tokenizer import InstructionTokenizer;"
+        "InstructionTokenizer.train(tokenizer_corpus()).save(Path(sys.argv[1]))"
+    )
+    for run in range(2):
+        other = tmp_path / f"process{run}"
+        other.mkdir()
+        subprocess.run([sys.executable, "-c", code, str(other)], check=True, timeout=120)
+        assert (other / "vocab.txt").read_text() == (tmp_path / "vocab.txt").read_text()
+    shuffled = tokenizer_corpus()
+    random.Random(3).shuffle(shuffled)
+    again = InstructionTokenizer.train(shuffled)
+    assert again.batch(tokenizer_corpus()).tolist() == tokenizer.batch(tokenizer_corpus()).tolist()
+
+
+def test_unseen_words_reuse_shared_stems_and_endings(tokenizer: InstructionTokenizer) -> None:
+    assert tokenizer.tokens("centering")[1:-1] == ["center", "##ing"]
+    assert tokenizer.tokens("Qz7")[1:-1] == ["q", "##z", "##7"]  # spelt from the alphabet, not [UNK]
 
 
 def test_held_out_words_become_known_pieces_not_unk(tokenizer: InstructionTokenizer) -> None:
