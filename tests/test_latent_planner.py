@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from controller.actions import Action
-from controller.latent.checkpoint import save_checkpoint
+from controller.latent.checkpoint import load_checkpoint, save_checkpoint
 from controller.latent.config import ModelConfig
 from controller.latent.errors import ImageInputError, InstructionError
 from controller.latent.instructions import tokenizer_corpus
@@ -20,6 +20,12 @@ def planner(tmp_path_factory: pytest.TempPathFactory) -> LatentPlanner:
     folder = tmp_path_factory.mktemp("ckpt")
     tok = InstructionTokenizer.train(tokenizer_corpus())
     model = LatentDynamicsModel(ModelConfig(image_size=40, base_width=8, vocab_size=tok.vocab_size))
+    for module in model.modules():  # trained-looking batch-norm statistics, so folding them matters
+        if isinstance(module, torch.nn.BatchNorm2d):
+            module.running_mean.uniform_(-0.5, 0.5)
+            module.running_var.uniform_(0.5, 2.0)
+            torch.nn.init.uniform_(module.weight, 0.5, 1.5)
+            torch.nn.init.uniform_(module.bias, -0.2, 0.2)
     save_checkpoint(folder, model, tok, torch.randn(128))
     return LatentPlanner(folder, threads=1)
 
@@ -40,15 +46,18 @@ def test_plan_picks_the_argmin_of_its_distances(planner: LatentPlanner) -> None:
     assert len(picked) >= 1
 
 
-def test_distances_match_the_model_directly(planner: LatentPlanner) -> None:
-    img = _images(1)[0]
-    _, distances = planner.plan(img, "please center the valve.")
-    x = torch.from_numpy(img).permute(2, 0, 1).unsqueeze(0).float() / 255
-    with torch.inference_mode():
-        direct = planner.model(
-            x, planner.tokenizer.batch(["please center the valve."]), planner._goal_image[0]
-        )
-    np.testing.assert_allclose(distances, direct[0].numpy(), rtol=1e-5, atol=1e-6)
+def test_distances_match_the_checkpoint_model_directly(planner: LatentPlanner) -> None:
+    # The planner folds batch-norm into the convolutions: the unfused checkpoint model must agree.
+    ckpt = load_checkpoint(planner.checkpoint_dir)
+    assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in planner.model.image_encoder.modules())
+    for img in _images(3):
+        _, distances = planner.plan(img, "please center the valve.")
+        x = torch.from_numpy(img).permute(2, 0, 1).unsqueeze(0).contiguous().float() / 255
+        with torch.inference_mode():
+            direct = ckpt.model.eval()(
+                x, ckpt.tokenizer.batch(["please center the valve."]), ckpt.goal_image_embedding
+            )
+        np.testing.assert_allclose(distances, direct[0].numpy(), rtol=1e-4, atol=1e-5)
 
 
 def test_batch_equals_single_calls(planner: LatentPlanner) -> None:

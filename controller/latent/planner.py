@@ -19,6 +19,7 @@ import torch
 from controller.actions import Action
 from controller.latent.checkpoint import load_checkpoint
 from controller.latent.errors import ImageInputError
+from controller.latent.image_encoder import fused_for_inference
 
 log = logging.getLogger(__name__)
 
@@ -31,7 +32,8 @@ class LatentPlanner:
             torch.set_num_threads(threads)
         ckpt = load_checkpoint(Path(checkpoint_dir))
         self.checkpoint_dir = Path(checkpoint_dir)
-        self.model = ckpt.model
+        self.model = ckpt.model.eval()
+        self.model.image_encoder = fused_for_inference(self.model.image_encoder)  # BN folded
         self.tokenizer = ckpt.tokenizer
         self.config = ckpt.config
         self.meta = ckpt.meta
@@ -55,7 +57,7 @@ class LatentPlanner:
             raise ImageInputError("plan_batch needs at least one image")
         text, z_goal = self._instruction(instruction)
         x = torch.from_numpy(np.stack([self.prepare(img) for img in images]))  # (N, S, S, 3) uint8
-        x = x.permute(0, 3, 1, 2).to(torch.float32).div_(255.0)  # (N, 3, S, S)
+        x = x.permute(0, 3, 1, 2).to(torch.float32).div_(255.0)  # (N, 3, S, S), channels-last strides
         n = x.shape[0]
         z_s = self.model.fuse_state(self.model.encode_images(x), text.expand(n, -1))  # (N, d)
         dist = self.model.score(z_s, z_goal.expand(n, -1))[0].numpy().astype(np.float32)  # (N, 9)
