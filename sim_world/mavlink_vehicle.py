@@ -35,9 +35,6 @@ from sim_world.mavlink.telemetry import DEFAULT_RATES_HZ, MessageScheduler, Tele
 
 log = logging.getLogger(__name__)
 
-VIDEO_DEATH_GRACE_S = 0.5
-"""On close, how long a render process killed with us (a process-group SIGTERM) may take to die."""
-
 
 class VideoFeed(Protocol):
     """The camera stream beside the vehicle (`sim_world.mavlink.video.WorldVideoFeed`)."""
@@ -156,17 +153,9 @@ class SimVehicle:
             if self._thread.is_alive():
                 log.error("sim vehicle loop did not stop within %.1f s", timeout_s)
         if self._video is not None:
-            # `timeout`, a supervisor or a closing terminal SIGTERMs the whole process group: the render
-            # process then dies with us, and its stop event must not be set, since a multiprocessing
-            # Event's set() waits for every sleeper to wake and a dead one never does (sim-vehicle hung
-            # here). A group signal kills it within milliseconds: wait that long before deciding.
-            deadline = time.monotonic() + VIDEO_DEATH_GRACE_S
-            while self._video.alive and time.monotonic() < deadline:
-                time.sleep(0.02)
-            if self._video.alive:
-                self._video.close()
-            else:
-                log.warning("the video render process had already exited: not stopping it")
+            # Safe when the render process already died with us (a process-group SIGTERM from
+            # `timeout`, a supervisor or a closing terminal): its stop flag is a lock-free byte.
+            self._video.close()
         if self._link is not None:
             self._link.close()
             self._link = None

@@ -35,6 +35,8 @@ log = logging.getLogger(__name__)
 
 # Shared pose layout: position ENU (3), quaternion xyzw (4), velocity ENU (3), sim time.
 _POSE_LEN = 11
+POSE_LOCK_TIMEOUT_S = 0.05
+STOP_POLL_S = 0.02  # the render process checks its stop flag at least this often while pacing
 
 
 class VideoError(RuntimeError):
@@ -58,9 +60,14 @@ class WorldVideoFeed:
         self.config = config
         ctx = mp.get_context("spawn")  # no fork of a process that holds a PyBullet client and threads
         self._pose = ctx.Array("d", _POSE_LEN)
-        self._frames = ctx.Value("q", 0)
-        self._render_s = ctx.Value("d", 0.0)
-        self._stop = ctx.Event()
+        # Lock-free shared flags and counters (one writer each): a render process killed while it
+        # held a lock, or while it slept in a multiprocessing Event's wait(), would hang the vehicle
+        # on its next set() or read (Event.set() waits for every sleeper to wake; a dead one never
+        # does: sim-vehicle hung on a process-group SIGTERM). Only the pose keeps a lock, taken by
+        # the vehicle with a timeout.
+        self._frames = ctx.Value("q", 0, lock=False)
+        self._render_s = ctx.Value("d", 0.0, lock=False)
+        self._stop = ctx.Value("b", 0, lock=False)
         self._conn, self._child_conn = ctx.Pipe(duplex=False)
         self.capture()
         self._proc = ctx.Process(
@@ -103,15 +110,21 @@ class WorldVideoFeed:
         """Hand the drone's current pose to the render process (cheap: no rendering here)."""
         s = self._world.state()
         values = [*s.position_enu_m, *s.quaternion_xyzw, *s.velocity_enu_m_s, self._world.time_s]
-        with self._pose.get_lock():
+        lock = self._pose.get_lock()
+        if not lock.acquire(timeout=POSE_LOCK_TIMEOUT_S):  # the renderer died holding it: skip
+            log.debug("video pose lock not free within %.2f s; frame pose not updated", POSE_LOCK_TIMEOUT_S)
+            return
+        try:
             self._pose[:] = values
+        finally:
+            lock.release()
 
     @property
     def alive(self) -> bool:
         return self._proc.is_alive()
 
     def close(self, timeout_s: float = 5.0) -> None:
-        self._stop.set()
+        self._stop.value = 1  # a plain shared byte: safe even if the render process is already dead
         if self._proc.pid is not None:
             self._proc.join(timeout_s)
             if self._proc.is_alive():
@@ -152,7 +165,7 @@ def _serve(
             parent = os.getppid()
             # A vehicle killed outright never sets `stop` (and `daemon=True` only acts on a normal
             # exit): re-parenting means it is gone, so stop rather than render for nobody forever.
-            while not stop.is_set() and os.getppid() == parent:
+            while not stop.value and os.getppid() == parent:
                 t0 = time.monotonic()
                 with pose.get_lock():
                     values = list(pose)
@@ -161,11 +174,11 @@ def _serve(
                 )
                 render = world.render(with_seg=True)
                 server.publish(render.rgb, frame_truth(world, render, values, origin_enu_m))
-                with frames.get_lock():
-                    frames.value += 1
-                    render_s.value += time.monotonic() - t0
+                render_s.value += time.monotonic() - t0
+                frames.value += 1
                 next_t = max(next_t + period, time.monotonic())
-                stop.wait(max(0.0, next_t - time.monotonic()))
+                while not stop.value and (left := next_t - time.monotonic()) > 0:
+                    time.sleep(min(STOP_POLL_S, left))
 
 
 def frame_truth(world: World, render: Any, pose: list[float], origin_enu_m: np.ndarray) -> dict[str, Any]:
