@@ -96,8 +96,8 @@ class ImageEncoder(nn.Module):
 def fused_for_inference(encoder: ImageEncoder) -> ImageEncoder:
     """An eval-mode copy with every BatchNorm folded into the convolution before it, channels-last.
 
-    Same outputs (to float rounding, ~1e-7) from fewer kernels: about 20 % less time per planner
-    decision on this CPU (docs/reproduce/README.md). For inference only: the folded copy has no
+    Same outputs (to float rounding, ~1e-7) from fewer kernels; `dronectl evaluate --latency`
+    measures the effect (docs/reproduce/README.md). For inference only: the folded copy has no
     batch statistics left to train.
     """
     fused = copy.deepcopy(encoder).eval()

@@ -72,12 +72,12 @@ class InstructionTokenizer:
                 f"vocab_size {vocab_size} is below the {len(tokens)} special and alphabet tokens"
             )
         seen = set(tokens)
-        shared = (Counter({k: v for k, v in group.items() if v >= 2}) for group in (stems, endings))
-        for group in (words, *shared):
-            for token, _ in sorted(group.items(), key=lambda kv: (-kv[1], kv[0])):
-                if len(tokens) < vocab_size and token not in seen:
-                    tokens.append(token)
-                    seen.add(token)
+        for token in [*_by_count(words), *_by_count(stems, 2), *_by_count(endings, 2)]:
+            if len(tokens) >= vocab_size:
+                break
+            if token not in seen:
+                tokens.append(token)
+                seen.add(token)
         tok = _empty_tokenizer(WordPiece(vocab={t: i for i, t in enumerate(tokens)}, unk_token="[UNK]"))
         _add_post_processor(tok)
         return cls(tok, max_tokens)
@@ -129,6 +129,12 @@ class InstructionTokenizer:
         for i, row in enumerate(rows):
             out[i, : len(row)] = torch.tensor(row, dtype=torch.long)
         return out
+
+
+def _by_count(counts: Counter[str], min_count: int = 1) -> list[str]:
+    """The keys counted at least `min_count` times, by falling count, ties alphabetical."""
+    ranked = sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))
+    return [token for token, n in ranked if n >= min_count]
 
 
 def _empty_tokenizer(model: WordPiece) -> Tokenizer:
