@@ -31,7 +31,7 @@ import numpy as np
 from tqdm import tqdm
 
 from controller.flight_kit import LoadedModels
-from controller.mission_schema import SIM, SIM_MAVLINK, Mission, PortSpec, parse_mission
+from controller.mission_schema import PX4_SITL, SIM, SIM_MAVLINK, Mission, PortSpec, parse_mission
 from controller.missions import MissionResult
 from controller.suite import UDP_PORTS_PER_MISSION, failed_to_start
 
@@ -40,7 +40,8 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class BenchmarkConfig:
-    """What to fly. `vehicle`: `sim` (in-process) or `sim-mavlink` (sim-vehicle + MAVSDK + MJPEG)."""
+    """What to fly. `vehicle`: `sim` (in-process), `sim-mavlink` (sim-vehicle + MAVSDK + MJPEG) or
+    `px4-sitl` (real PX4 SITL flying the world, lockstep, `px4_speed` "max" by default)."""
 
     n: int = 200
     seed: int = 0
@@ -61,12 +62,17 @@ class BenchmarkConfig:
     parallel: int = 1
     udp_port_base: int = 14860
     http_port_base: int = 18860
+    px4_dir: str | None = None
+    """PX4 SITL build folder for `px4-sitl` (None: $PX4_SITL_DIR)."""
+    px4_speed: float | str = "max"
 
     def __post_init__(self) -> None:
         if self.n < 1 or self.parallel < 1:
             raise ValueError("n and parallel must be >= 1")
-        if self.vehicle not in (SIM, SIM_MAVLINK):
-            raise ValueError(f"vehicle must be {SIM!r} or {SIM_MAVLINK!r}, got {self.vehicle!r}")
+        if self.vehicle not in (SIM, SIM_MAVLINK, PX4_SITL):
+            raise ValueError(
+                f"vehicle must be {SIM!r}, {SIM_MAVLINK!r} or {PX4_SITL!r}, got {self.vehicle!r}"
+            )
         unknown = set(self.planners) - {"latent", "classic", "random", "oracle"}
         if unknown or not self.planners:
             raise ValueError(f"planners must be among latent, classic, random, oracle; got {self.planners}")
@@ -106,6 +112,8 @@ def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozen
                     mavlink_udp=config.udp_port_base + UDP_PORTS_PER_MISSION * slot,
                     http=config.http_port_base + slot,
                 ).model_dump(),
+                **({"px4": {"dir": config.px4_dir, "speed": config.px4_speed, "keep_ulog": False}}
+                   if config.vehicle == PX4_SITL else {}),
             })
         )  # fmt: skip
     return missions

@@ -40,6 +40,7 @@ from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
 from perception.centring import default_epsilon_px
 from perception.detector import Detector
 from perception.stream_camera import StreamCamera
+from sim_world.scene_config import SceneConfig
 from sim_world.scene_sampling import sample_scene
 
 log = logging.getLogger(__name__)
@@ -171,42 +172,57 @@ def open_sim_mavlink_kit(
         tlog = stack.enter_context(MavlinkTlogProxy(p + 1, p + 2, out_dir / TLOG_NAME))
         vehicle = stack.enter_context(MavsdkVehicle(MavsdkConfig(url=f"udpin://127.0.0.1:{p + 2}")))
         camera = stack.enter_context(StreamCamera(f"{base}/stream.mjpg", timeout_s=3.0, open_timeout_s=10.0))
-        target = sample_scene(scene, mission.scene.seed).target  # numbers only: the sim's own draw
-        # sim-vehicle starts landed below the start pose: the takeoff climbs to the pose's height.
-        climb_m = target.height_m + start.up_m - truth.ground_height_m()
-        if climb_m < PX4_MIN_TAKEOFF_ALT_M:
-            log.warning(
-                "start %.2f m above ground: taking off to PX4's minimum %.1f m",
-                climb_m,
-                PX4_MIN_TAKEOFF_ALT_M,
-            )
-            climb_m = PX4_MIN_TAKEOFF_ALT_M
-        target_kind = target.kind
-        planner = models_planner(mission, models, truth.offset_px) or make_planner(
-            mission.planner,
-            checkpoint=mission.checkpoint,
-            seed=mission.scene.seed,
-            truth_offset=truth.offset_px,
-        )
-        yield FlightKit(
-            vehicle=vehicle,
-            camera=camera,
-            detector=_detector(mission, models),
-            planner=planner,
-            epsilon_px=mission.epsilon_px or default_epsilon_px(SIM_IMAGE_PX),
-            instruction=mission.instruction_text(target_kind),
-            truth_probe=truth.offset_px,
-            takeoff_altitude_m=climb_m,
+        yield simulated_mavlink_kit(
+            mission, models, vehicle, camera, truth, scene, start,
             info={
                 "backend": "sim-vehicle subprocess over MAVLink (MAVSDK) + MJPEG stream",
-                "scene_seed": mission.scene.seed,
-                "target_kind": target_kind,
-                "start": start.model_dump(),
                 "ports": {"sim_udp": p, "tlog_relay_udp": p + 1, "mavsdk_udp": p + 2, "video_http": http},
                 "tlog": "recorded by controller.tlog_proxy between sim-vehicle and MAVSDK",
             },
             tlog_path=tlog.path,
+        )  # fmt: skip
+
+
+def simulated_mavlink_kit(
+    mission: Mission,
+    models: LoadedModels | None,
+    vehicle: MavsdkVehicle,
+    camera: StreamCamera,
+    truth: SimTruth,
+    scene: SceneConfig,
+    start: StartOffset,
+    info: dict[str, Any],
+    tlog_path: Path | None,
+) -> FlightKit:
+    """The kit of a simulated vehicle flown over MAVLink (sim-vehicle, PX4 SITL): it starts landed below
+    the mission's start pose, so the takeoff climbs to the pose's height; truth judges, never flies."""
+    target = sample_scene(scene, mission.scene.seed).target  # numbers only: the simulator's own draw
+    climb_m = target.height_m + start.up_m - truth.ground_height_m()
+    if climb_m < PX4_MIN_TAKEOFF_ALT_M:
+        log.warning(
+            "start %.2f m above ground: taking off to PX4's minimum %.1f m", climb_m, PX4_MIN_TAKEOFF_ALT_M
         )
+        climb_m = PX4_MIN_TAKEOFF_ALT_M
+    planner = models_planner(mission, models, truth.offset_px) or make_planner(
+        mission.planner, checkpoint=mission.checkpoint, seed=mission.scene.seed, truth_offset=truth.offset_px
+    )
+    return FlightKit(
+        vehicle=vehicle,
+        camera=camera,
+        detector=_detector(mission, models),
+        planner=planner,
+        epsilon_px=mission.epsilon_px or default_epsilon_px(SIM_IMAGE_PX),
+        instruction=mission.instruction_text(target.kind),
+        truth_probe=truth.offset_px,
+        takeoff_altitude_m=climb_m,
+        info={
+            "scene_seed": mission.scene.seed,
+            "target_kind": target.kind,
+            "start": start.model_dump(),
+            **info,
+        },
+        tlog_path=tlog_path,
+    )
 
 
 def _udpin_port(url: str) -> int | None:

@@ -27,11 +27,12 @@ from pathlib import Path
 
 from controller.centring_loop import CentringConfig, CentringLoop, Outcome, count_refinements
 from controller.flight_kit import FlightKit, LoadedModels
-from controller.mission_schema import SIM, SIM_MAVLINK, Mission
+from controller.mission_schema import PX4_SITL, SIM, SIM_MAVLINK, Mission
 from controller.missions import MissionResult, count_steps, judge
 from controller.report import ReportWriter
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, flight_guard
+from flight.signals import StopRequested
 from flight.types import VelocityBody
 from flight.vehicle import Vehicle, wait_for
 
@@ -52,8 +53,9 @@ def loop_config(mission: Mission, epsilon_px: float, instruction: str) -> Centri
     )
 
 
-def _take_off_to_start(vehicle: Vehicle, kit: FlightKit, mission: Mission) -> None:
+def _take_off_to_start(vehicle: Vehicle, kit: FlightKit, mission: Mission, clock: dict[str, float]) -> None:
     vehicle.wait_ready()
+    clock["ready_s"] = vehicle.time_s()
     vehicle.arm()
     vehicle.takeoff(kit.takeoff_altitude_m or mission.takeoff_altitude_m)
     if kit.place_at_start is not None:
@@ -64,6 +66,7 @@ def _take_off_to_start(vehicle: Vehicle, kit: FlightKit, mission: Mission) -> No
     )
     vehicle.set_velocity_body(VelocityBody())  # PX4 needs a setpoint before offboard
     vehicle.start_offboard()
+    clock["offboard_s"] = vehicle.time_s()
 
 
 def fly_kit(
@@ -101,10 +104,12 @@ def fly_kit(
     )
     outcome, message, error = Outcome.ABORTED, "", None
     vehicle_start_s = vehicle_end_s = 0.0
+    clock: dict[str, float] = {}  # milestones on the vehicle's clock (PX4 SITL's: simulated time)
     try:
         vehicle.connect()
+        clock["connected_s"] = vehicle.time_s()
         with flight_guard(vehicle):
-            _take_off_to_start(vehicle, kit, mission)
+            _take_off_to_start(vehicle, kit, mission, clock)
             vehicle_start_s = vehicle.time_s()
             result = loop.run()
             outcome, message = result.outcome, result.message
@@ -112,8 +117,9 @@ def fly_kit(
             vehicle.stop_offboard()
             vehicle.land()
             vehicle.disarm()
-    except KeyboardInterrupt:
-        error = message = "interrupted (Ctrl-C); a vehicle in the air was held, then landed"
+    except KeyboardInterrupt as exc:
+        how = str(exc) if isinstance(exc, StopRequested) else "stopped by Ctrl-C"
+        error = message = f"interrupted ({how}); a vehicle in the air was held, then landed"
         raise
     except Exception as exc:
         error = message = f"{type(exc).__name__}: {exc}"
@@ -121,7 +127,7 @@ def fly_kit(
     finally:
         mission_result = _finish(
             kit, mission, writer, loop, outcome, message, error, time.perf_counter() - wall_start,
-            max(0.0, vehicle_end_s - vehicle_start_s),
+            max(0.0, vehicle_end_s - vehicle_start_s), clock,
         )  # fmt: skip
     return mission_result
 
@@ -136,6 +142,7 @@ def _finish(
     error: str | None,
     wall_s: float,
     vehicle_s: float,
+    clock: dict[str, float],
 ) -> MissionResult:
     steps = loop.steps
     final_truth = steps[-1].truth_offset_px if steps else None
@@ -158,6 +165,7 @@ def _finish(
         "final_offset_px": {"truth": final_truth, "detector": final_detector},
         "wall_s": round(wall_s, 3),
         "vehicle_s": round(vehicle_s, 3),
+        "vehicle_clock_s": {name: round(value, 3) for name, value in clock.items()},
         "error": error,
     }
     final = writer.finish(summary, kit.tlog_path)
@@ -180,6 +188,7 @@ def _finish(
         tags=mission.tags,
         info=kit.info,
         refinement_moves=summary["refinement_moves"],
+        vehicle_clock_s=summary["vehicle_clock_s"],
     )
 
 
@@ -197,6 +206,10 @@ def open_kit(
             from controller.hil import open_sim_mavlink_kit
 
             yield stack.enter_context(open_sim_mavlink_kit(mission, out_dir, models))
+        elif mission.vehicle == PX4_SITL:
+            from controller.px4_kit import open_px4_sitl_kit
+
+            yield stack.enter_context(open_px4_sitl_kit(mission, out_dir, models))
         else:
             from controller.hil import open_real_kit
 

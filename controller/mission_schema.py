@@ -13,7 +13,7 @@ target_kind: gauge               # gauge | valve | switchbox | null (the scene d
 start: {right_m: -0.5, up_m: -0.4, distance_m: 2.0, yaw_deg: 0}   # drone pose relative to the centred pose
 # start: {random: {seed: 7, view_fraction: [0.2, 0.8], distance_m: [1.6, 2.6], yaw_deg: [-8, 8]}}
 instruction: center the gauge
-vehicle: sim                     # sim | sim-mavlink | a MAVLink URL (udp://:14540, tcp://host:5760, serial:///dev/ttyACM0)
+vehicle: sim                     # sim | sim-mavlink | px4-sitl | a MAVLink URL (udpin://0.0.0.0:14540, serial:///dev/ttyACM0:57600)
 camera: sim                      # sim | a stream URL (http://host:8080/stream.mjpg, rtsp://...)
 planner: latent                  # latent | classic | random | oracle
 checkpoint: null                 # null: the shipped one
@@ -25,6 +25,7 @@ timeout_s: 120
 wind: {mean_enu_m_s: [0.3, 0, 0], gust_std_m_s: 0.2}
 loop: {max_move_m: 1.0}          # CentringConfig overrides (move scheme, refinement budget, ...)
 expect: {outcome: centred, max_steps: 12, final_offset_px: 10}
+px4: {instance: auto, speed: 1.0}  # vehicle: px4-sitl only (the PX4 folder: --px4 or $PX4_SITL_DIR)
 ```
 
 `start` is the drone's pose relative to the pose that centres the target (in front
@@ -63,6 +64,8 @@ OutcomeName = Literal["centred", "max_steps", "timeout", "target_lost", "planner
 
 SIM = "sim"
 SIM_MAVLINK = "sim-mavlink"
+PX4_SITL = "px4-sitl"
+SIMULATED_VEHICLES = (SIM, SIM_MAVLINK, PX4_SITL)
 _MAVLINK_SCHEMES = ("udp://", "udpin://", "udpout://", "tcp://", "tcpin://", "tcpout://", "serial://")
 _STREAM_SCHEMES = ("http://", "https://", "rtsp://", "file://")
 
@@ -200,6 +203,37 @@ class PortSpec(_Strict):
     http: int = Field(default=18840, ge=1024, le=65535)
 
 
+class Px4Spec(_Strict):
+    """How a `px4-sitl` mission runs PX4 SITL (see `sim_world.px4_bridge`)."""
+
+    dir: str | None = None
+    """PX4 SITL build folder; None: the `--px4` option, else $PX4_SITL_DIR."""
+    instance: int | Literal["auto"] = "auto"
+    """PX4 instance 0..9 (ports 4560+N, 14540+N); "auto": the lowest one no other run holds."""
+    speed: float | Literal["max"] = 1.0
+    """Simulated seconds per wall second, or "max" (lockstep as fast as it goes; benchmarks)."""
+    noise: float = Field(default=1.0, gt=0.0, le=10.0)
+    """Scale of every sensor noise and bias (PX4 refuses perfectly constant sensors: > 0)."""
+    keep_ulog: bool = True
+    """Copy PX4's .ulg flight log into the report folder (`px4/`); ~4 MB per 20 s."""
+    params: dict[str, float] = Field(default_factory=dict)
+    """PX4 parameters set at boot (`MPC_XY_VEL_MAX: 1.0`)."""
+
+    @field_validator("instance")
+    @classmethod
+    def _instance_range(cls, value: int | str) -> int | str:
+        if isinstance(value, int) and not 0 <= value <= 9:
+            raise ValueError(f"must be 0..9 or 'auto', got {value}")
+        return value
+
+    @field_validator("speed")
+    @classmethod
+    def _speed_range(cls, value: float | str) -> float | str:
+        if isinstance(value, float) and not 0.05 <= value <= 100.0:
+            raise ValueError(f"must be in [0.05, 100] or 'max', got {value:g}")
+        return value
+
+
 class Mission(_Strict):
     """One centring mission."""
 
@@ -229,6 +263,7 @@ class Mission(_Strict):
     loop: LoopOverrides = LoopOverrides()
     expect: Expectations = Expectations()
     ports: PortSpec = PortSpec()
+    px4: Px4Spec = Px4Spec()
 
     @model_validator(mode="after")
     def _links(self) -> Mission:
@@ -240,9 +275,9 @@ class Mission(_Strict):
             raise ValueError(
                 f"stop_margin_px: {self.stop_margin_px:g} must be smaller than epsilon_px {self.epsilon_px:g}"
             )
-        if self.vehicle not in (SIM, SIM_MAVLINK) and not self.vehicle.startswith(_MAVLINK_SCHEMES):
+        if self.vehicle not in SIMULATED_VEHICLES and not self.vehicle.startswith(_MAVLINK_SCHEMES):
             raise ValueError(
-                f"vehicle: {self.vehicle!r} is neither 'sim', 'sim-mavlink' nor a MAVLink URL "
+                f"vehicle: {self.vehicle!r} is neither 'sim', 'sim-mavlink', 'px4-sitl' nor a MAVLink URL "
                 f"({', '.join(s + '...' for s in _MAVLINK_SCHEMES)})"
             )
         if self.is_real:
@@ -257,16 +292,19 @@ class Mission(_Strict):
             )
         if self.is_real and self.camera == SIM:
             raise ValueError("camera: a real vehicle needs a stream URL, not 'sim'")
-        if self.vehicle == SIM and self.camera != SIM:
+        if not self.is_real and self.camera != SIM:
             raise ValueError(
-                "camera: the in-process sim vehicle ('sim') renders its own camera; use camera: sim"
+                f"camera: the simulated vehicle {self.vehicle!r} streams its own camera; use camera: sim "
+                "(a camera URL goes with a real vehicle's MAVLink URL)"
             )
         if self.is_real and self.detector == "truth":
             raise ValueError("detector: 'truth' needs the simulator; a real vehicle uses the image detector")
         if self.vehicle != SIM and self.detector == "truth":
             raise ValueError("detector: 'truth' is available in the in-process sim only (vehicle: sim)")
-        if self.vehicle != SIM and self.wind is not None:
-            raise ValueError("wind: only the in-process sim (vehicle: sim) simulates wind")
+        if self.vehicle not in (SIM, PX4_SITL) and self.wind is not None:
+            raise ValueError("wind: only the simulated worlds of 'sim' and 'px4-sitl' simulate wind")
+        if self.vehicle != PX4_SITL and "px4" in self.model_fields_set:
+            raise ValueError(f"px4: only a 'px4-sitl' mission runs PX4 SITL (vehicle is {self.vehicle!r})")
         if self.is_real and self.planner == "oracle":
             raise ValueError("planner: 'oracle' needs simulator truth, which a real vehicle does not have")
         return self
@@ -274,7 +312,7 @@ class Mission(_Strict):
     @property
     def is_real(self) -> bool:
         """Flown on a vehicle at a URL: no simulator, no truth."""
-        return self.vehicle not in (SIM, SIM_MAVLINK)
+        return self.vehicle not in SIMULATED_VEHICLES
 
     def with_seed(self, seed: int) -> Mission:
         """The same mission in scene `seed` (a random start is redrawn from the same seed)."""

@@ -16,6 +16,7 @@ from typing import Any
 from controller.centring_loop import Outcome, StepRecord
 from controller.mission_schema import Mission, MissionFileError, RandomStartSpec, StartOffset, load_mission
 from sim_world.scene_config import DEFAULT_SCENE, SceneConfig, load_scene_config, parse_scene_config
+from sim_world.wind import WindConfig
 
 
 @dataclass(frozen=True)
@@ -41,6 +42,8 @@ class MissionResult:
     refinement_moves: int = 0
     """Boundary refinement moves the loop flew after the planner chose "no move" (see centring_loop)."""
     info: dict[str, Any] = field(default_factory=dict)
+    vehicle_clock_s: dict[str, float] = field(default_factory=dict)
+    """Milestones (connected, ready, offboard) on the vehicle's clock (PX4 SITL: its simulated time)."""
 
     @property
     def final_truth_error_px(self) -> float | None:
@@ -123,6 +126,17 @@ def scene_config_for(mission: Mission) -> SceneConfig:
         target = config.target.model_copy(update={"kinds": (mission.target_kind,)})
         config = config.model_copy(update={"target": target})
     return config
+
+
+def wind_config_for(mission: Mission) -> WindConfig:
+    """The mission's wind for a simulated world (calm when it names none)."""
+    if mission.wind is None:
+        return WindConfig()
+    return WindConfig(
+        mean_enu_m_s=mission.wind.mean_enu_m_s,
+        gust_std_m_s=mission.wind.gust_std_m_s,
+        gust_time_constant_s=mission.wind.gust_time_constant_s,
+    )
 
 
 def start_offset_for(mission: Mission, hfov_deg: float, vfov_deg: float) -> StartOffset:

@@ -17,7 +17,7 @@ from typing import Any
 
 from controller.flight_kit import FlightKit, LoadedModels, models_detector, models_planner
 from controller.mission_schema import Mission, StartOffset
-from controller.missions import scene_config_for, start_offset_for
+from controller.missions import scene_config_for, start_offset_for, wind_config_for
 from controller.planners import make_planner
 from flight.pybullet_backend import PyBulletVehicle
 from flight.safe_vehicle import SafeVehicle
@@ -25,21 +25,15 @@ from flight.safety import SafetyLimits
 from perception.centring import default_epsilon_px
 from perception.detector import Detector, TruthDetector
 from perception.sim_camera import SimCamera
-from sim_world.wind import WindConfig
 from sim_world.world import World, WorldConfig
 
 log = logging.getLogger(__name__)
 
 
 def world_config_for(mission: Mission, start: StartOffset) -> WorldConfig:
-    wind = WindConfig()
-    if mission.wind is not None:
-        wind = WindConfig(
-            mean_enu_m_s=mission.wind.mean_enu_m_s,
-            gust_std_m_s=mission.wind.gust_std_m_s,
-            gust_time_constant_s=mission.wind.gust_time_constant_s,
-        )
-    return WorldConfig(scene=scene_config_for(mission), wind=wind, start_distance_m=start.distance_m)
+    return WorldConfig(
+        scene=scene_config_for(mission), wind=wind_config_for(mission), start_distance_m=start.distance_m
+    )
 
 
 def truth_offset(world: World) -> tuple[float, float] | None:

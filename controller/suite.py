@@ -19,7 +19,7 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
-from controller.mission_schema import SIM_MAVLINK, Mission, PortSpec, load_mission
+from controller.mission_schema import PX4_SITL, SIM_MAVLINK, Mission, PortSpec, load_mission
 from controller.missions import MissionResult, load_suite
 
 log = logging.getLogger(__name__)
@@ -40,6 +40,8 @@ class SuiteOptions:
     udp_port_base: int = 14800
     http_port_base: int = 18800
     max_slots: int = 25
+    px4_dir: str | None = None
+    """The PX4 SITL folder for `px4-sitl` missions that name none (None: $PX4_SITL_DIR)."""
 
     def __post_init__(self) -> None:
         if self.parallel < 1:
@@ -103,12 +105,19 @@ def failed_to_start(mission: Mission, error: str, wall_s: float) -> MissionResul
 
 
 def assign_ports(missions: list[Mission], options: SuiteOptions) -> list[Mission]:
-    """Give every sim-vehicle mission its own port slot."""
+    """Give every sim-vehicle mission its own port slot, and px4-sitl missions the suite's PX4 folder.
+
+    (A px4-sitl mission's ports follow its PX4 instance, which each run locks for itself.)
+    """
     out, slot = [], 0
     for mission in missions:
         if mission.vehicle == SIM_MAVLINK:
             mission = mission.model_copy(update={"ports": options.ports(slot)})
             slot += 1
+        if mission.vehicle == PX4_SITL and mission.px4.dir is None and options.px4_dir is not None:
+            mission = mission.model_copy(
+                update={"px4": mission.px4.model_copy(update={"dir": options.px4_dir})}
+            )
         out.append(mission)
     return out
 

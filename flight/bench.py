@@ -13,6 +13,12 @@ Prints (and with `--json FILE` writes):
 - command round trip (Hold while holding: COMMAND_LONG → COMMAND_ACK) p50/p99;
 - one discrete move's wall time for each backend (MAVSDK: real time; PyBullet: in-process).
 Targets (issue 3): discovery → offboard ≤ 5 s, setpoint stream ≥ 20 Hz, RTT p99 ≤ 50 ms.
+
+`--vehicle URL` flies the MAVSDK part against a vehicle that is already running (PX4 SITL
+from `dronectl px4-sim`, a real vehicle on the bench with its propellers off) instead of a
+sim-vehicle it launches; a `udpin://` URL is relayed (the relay takes the URL's port) so the
+setpoint stream is measured too. The takeoff-first reference needs a fresh vehicle and is
+skipped then.
 """
 
 from __future__ import annotations
@@ -20,15 +26,17 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import re
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from flight.errors import ConnectionUrlError
 from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
 from flight.moves import execute_move
 from flight.pybullet_backend import PyBulletVehicle
@@ -38,6 +46,7 @@ from flight.safety import flight_guard
 from flight.scenario import MoveFlight, fly_move
 from flight.sim_process import SimVehicleOptions, SimVehicleProcess
 from flight.types import VelocityBody
+from flight.urls import validate_connection_url
 
 log = logging.getLogger(__name__)
 
@@ -52,15 +61,16 @@ class FlightBenchConfig:
     boot_delay_s: float = 2.5  # PX4's arming delay after boot
     move: MoveFlight = field(default_factory=MoveFlight)
     seed: int = 0
+    vehicle_url: str | None = None  # None: launch a sim-vehicle; else fly the vehicle at this URL
 
 
 @dataclass
 class _BenchFlight:
     """One sim-vehicle process with MAVSDK connected through the setpoint-counting relay."""
 
-    t0: float  # perf_counter() when the sim-vehicle was launched
-    sim: SimVehicleProcess
-    relay: MavlinkRelay
+    t0: float  # perf_counter() when the sim-vehicle was launched (or the bench began)
+    sim: SimVehicleProcess | None
+    relay: MavlinkRelay | None
     vehicle: MavsdkVehicle
     safe: SafeVehicle
     marks: dict[str, float] = field(default_factory=dict)  # seconds since t0
@@ -71,25 +81,43 @@ class _BenchFlight:
 
 @contextmanager
 def _armed_flight(config: FlightBenchConfig) -> Iterator[_BenchFlight]:
-    """Launch a sim-vehicle, discover it, wait until ready and arm (inside `flight_guard`)."""
+    """Launch a sim-vehicle (or use `vehicle_url`), discover it, wait until ready, arm (in flight_guard)."""
     base = config.base_port
     t0 = time.perf_counter()
-    options = SimVehicleOptions(local_port=base, remote_port=base + 1, boot_delay_s=config.boot_delay_s)
-    with (
-        SimVehicleProcess(options) as sim,
-        MavlinkRelay(listen_port=base + 1, client_port=base + 2) as relay,
-        MavsdkVehicle(MavsdkConfig(url=f"udpin://127.0.0.1:{base + 2}")) as vehicle,
-    ):
+    with ExitStack() as stack:
+        sim, relay, url = None, None, f"udpin://127.0.0.1:{base + 2}"
+        if config.vehicle_url is None:
+            options = SimVehicleOptions(
+                local_port=base, remote_port=base + 1, boot_delay_s=config.boot_delay_s
+            )
+            sim = stack.enter_context(SimVehicleProcess(options))
+            relay = stack.enter_context(MavlinkRelay(listen_port=base + 1, client_port=base + 2))
+        elif (listen := _udpin_address(config.vehicle_url)) is not None:
+            relay = stack.enter_context(
+                MavlinkRelay(listen_port=listen[1], client_port=base + 2, host=listen[0])
+            )
+        else:
+            url = config.vehicle_url
+        vehicle = stack.enter_context(MavsdkVehicle(MavsdkConfig(url=url)))
         flight = _BenchFlight(t0, sim, relay, vehicle, SafeVehicle(vehicle))
         flight.mark("sim_ready_s")
         flight.safe.connect()
         flight.mark("discovered_s")
         with flight_guard(flight.safe):
             flight.safe.wait_ready()
+            flight.mark("ready_s")
             flight.safe.arm()
             flight.mark("armed_s")
             yield flight
-        log.debug("sim-vehicle said: %s", sim.output()[-500:])
+        if sim is not None:
+            log.debug("sim-vehicle said: %s", sim.output()[-500:])
+
+
+def _udpin_address(url: str) -> tuple[str, int] | None:
+    """(host, port) of a `udpin://HOST:PORT` URL, else None."""
+    validate_connection_url(url)
+    match = re.fullmatch(r"udpin://([0-9.]+):(\d+)", url.strip())
+    return None if match is None else (match.group(1), int(match.group(2)))
 
 
 def _mavsdk_bench(config: FlightBenchConfig) -> dict[str, Any]:
@@ -128,7 +156,8 @@ def _mavsdk_bench(config: FlightBenchConfig) -> dict[str, Any]:
         "arming_wait_s": marks["armed_s"] - marks["discovered_s"],
         "offboard_confirm_s": marks["offboard_active_s"] - marks["armed_s"],
         "offboard_climb_s": marks["airborne_s"] - marks["offboard_active_s"],
-        "takeoff_then_offboard": _takeoff_then_offboard_bench(config),
+        "takeoff_then_offboard": None if config.vehicle_url else _takeoff_then_offboard_bench(config),
+        "vehicle": config.vehicle_url or "sim-vehicle (launched by the bench)",
         "setpoint_stream_holding": holding,
         "setpoint_stream_moving": moving,
         "command_rtt_ms": {
@@ -162,8 +191,10 @@ def _takeoff_then_offboard_bench(config: FlightBenchConfig) -> dict[str, Any]:
     }
 
 
-def _stream_stats(relay: MavlinkRelay, start_s: float, end_s: float) -> dict[str, float]:
+def _stream_stats(relay: MavlinkRelay | None, start_s: float, end_s: float) -> dict[str, float]:
     """Rate and largest gap of the setpoints that reached the vehicle between two monotonic times."""
+    if relay is None:  # a serial or TCP link: not relayed, not measured
+        return {"rate_hz": float("nan"), "max_gap_ms": float("nan"), "count": 0}
     times = [t for t in relay.message_times_s(SET_POSITION_TARGET_LOCAL_NED) if start_s <= t <= end_s]
     if len(times) < 2:
         return {"rate_hz": 0.0, "max_gap_ms": float("nan"), "count": len(times)}
@@ -220,7 +251,7 @@ def _print_report(report: dict[str, Any]) -> None:
 
     marks = ", ".join(f"{k[:-2]} {v:.2f} s" for k, v in m["process_start_to"].items())
     ref = m["takeoff_then_offboard"]
-    print("flight benchmark (loopback, dronectl sim-vehicle in a subprocess)")
+    print(f"flight benchmark (loopback; vehicle: {m['vehicle']})")
     print(f"  from process start: {marks}")
     print(
         f"  discovery -> offboard active (arm, zero setpoint, offboard start on the ground): "
@@ -229,12 +260,14 @@ def _print_report(report: dict[str, Any]) -> None:
         f"[target <= 5 s: {ok('discovery_to_offboard_s')}]"
     )
     print(f"  then climb to {report['move_altitude_m']:.1f} m in offboard: {m['offboard_climb_s']:.2f} s")
-    print(
-        f"  reference, takeoff first (arm, NAV_TAKEOFF, offboard start): discovery -> offboard active "
-        f"{ref['discovery_to_offboard_s']:.2f} s (process start -> discovery "
-        f"{ref['process_start_to']['discovered_s']:.2f} s, arm wait {ref['arming_wait_s']:.2f} s, "
-        f"takeoff climb {ref['takeoff_climb_s']:.2f} s, offboard confirm {ref['offboard_confirm_s']:.2f} s)"
-    )
+    if ref is not None:
+        print(
+            f"  reference, takeoff first (arm, NAV_TAKEOFF, offboard start): discovery -> offboard active "
+            f"{ref['discovery_to_offboard_s']:.2f} s (process start -> discovery "
+            f"{ref['process_start_to']['discovered_s']:.2f} s, arm wait {ref['arming_wait_s']:.2f} s, "
+            f"takeoff climb {ref['takeoff_climb_s']:.2f} s, "
+            f"offboard confirm {ref['offboard_confirm_s']:.2f} s)"
+        )
     held, moving = m["setpoint_stream_holding"], m["setpoint_stream_moving"]
     print(
         f"  setpoints at the vehicle while moving: {moving['rate_hz']:.2f} Hz, largest gap "
@@ -269,8 +302,21 @@ def bench_main(argv: list[str]) -> int:
         "--base-port", type=int, default=14790, help="UDP ports base..base+2 (default %(default)s)"
     )
     parser.add_argument("--rtt-samples", type=int, default=200, help="command round trips to time")
+    parser.add_argument(
+        "--vehicle",
+        help="fly a vehicle that is already running (e.g. udpin://0.0.0.0:14540 for `dronectl px4-sim`) "
+        "instead of launching a sim-vehicle",
+    )
     args = parser.parse_args(argv)
-    report = run_flight_bench(FlightBenchConfig(base_port=args.base_port, rtt_samples=args.rtt_samples))
+    try:
+        config = FlightBenchConfig(
+            base_port=args.base_port, rtt_samples=args.rtt_samples, vehicle_url=args.vehicle
+        )
+        if args.vehicle:
+            validate_connection_url(args.vehicle)
+    except (ValueError, ConnectionUrlError) as exc:
+        parser.error(str(exc))
+    report = run_flight_bench(config)
     _print_report(report)
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)

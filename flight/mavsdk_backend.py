@@ -11,7 +11,12 @@ Written for real PX4 (SITL or hardware) as much as for `dronectl sim-vehicle`:
 - MAVSDK re-sends the last setpoint at 20 Hz by itself: `set_velocity_body` is
   called only when the command changes or the caller refreshes it, never in a loop.
 - link loss (no telemetry for `link_timeout_s`, or MAVSDK's connection state
-  going false) raises `LinkLostError` from `telemetry()` and so from every wait.
+  going false) raises `LinkLostError` from `telemetry()` and so from every wait;
+- `expected_system_id`: connect only to the autopilot with that MAVLink system id
+  (the per-run identity of a vehicle the caller launched) and refuse any other;
+- `clock="vehicle"`: `time_s()`/`sleep()` follow the autopilot's own clock (the
+  `time_boot_ms` of its ATTITUDE stream) instead of the wall clock, for a simulated
+  autopilot running faster or slower than real time in lockstep (PX4 SITL).
 
 MAVSDK's sync callbacks all run on one MAVSDK thread, and blocking calls return
 through it: the callbacks here only store values under a lock.
@@ -50,6 +55,7 @@ log = logging.getLogger(__name__)
 
 _RETRY_ARM = {ActionResult.COMMAND_DENIED, ActionResult.BUSY, ActionResult.TIMEOUT, ActionResult.FAILED}
 _NAN3 = (math.nan, math.nan, math.nan)
+READY_REPORT_EVERY_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -63,9 +69,15 @@ class MavsdkConfig:
     altitude_tolerance_m: float = 0.3
     climb_done_speed_m_s: float = 0.2  # takeoff ends when the climb has (nearly) stopped
     poll_s: float = 0.02
+    expected_system_id: int | None = None
+    clock: str = "wall"  # or "vehicle": the autopilot's clock (see the module docstring)
 
     def __post_init__(self) -> None:
         validate_connection_url(self.url)
+        if self.clock not in ("wall", "vehicle"):
+            raise ValueError(f"MavsdkConfig.clock must be 'wall' or 'vehicle', got {self.clock!r}")
+        if self.expected_system_id is not None and not 1 <= self.expected_system_id <= 255:
+            raise ValueError(f"MavsdkConfig.expected_system_id must be 1..255, got {self.expected_system_id}")
         if not (self.link_timeout_s > 0 and self.arm_retry_period_s > 0 and self.poll_s > 0):
             raise ValueError("MavsdkConfig: link_timeout_s, arm_retry_period_s and poll_s must be > 0")
 
@@ -112,6 +124,7 @@ class MavsdkVehicle(Vehicle):
         self._setpoint_set = False
         self._in_offboard = False
         self._ground_down_m = math.nan
+        self._vehicle_time_s = math.nan  # the autopilot's clock, from its ATTITUDE timestamps
 
     # --- connection ---------------------------------------------------------------------------
     def connect(self, timeout_s: float | None = None) -> None:
@@ -130,7 +143,11 @@ class MavsdkVehicle(Vehicle):
             )
             self.close()
             raise VehicleConnectionError("connect()", result.name, f"cannot open {url}{hint}")
-        system = self._mavsdk.first_autopilot(timeout_s)
+        system = (
+            self._mavsdk.first_autopilot(timeout_s)
+            if self.config.expected_system_id is None
+            else self._autopilot_with_id(self.config.expected_system_id, timeout_s)
+        )
         if system is None:
             self.close()
             raise VehicleConnectionError(
@@ -148,7 +165,39 @@ class MavsdkVehicle(Vehicle):
         self._action = Action(system)
         self._offboard = Offboard(system)
         self._subscribe(system, self._telemetry)
-        log.info("connected to an autopilot on %s", url)
+        if self.config.clock == "vehicle":
+            deadline = time.monotonic() + timeout_s
+            while math.isnan(self._vehicle_time_s):
+                if time.monotonic() > deadline:
+                    self.close()
+                    raise VehicleConnectionError(
+                        "connect()", "NO_VEHICLE_CLOCK", f"no timestamped ATTITUDE within {timeout_s:.1f} s"
+                    )
+                time.sleep(0.01)
+        log.info("connected to an autopilot on %s (system id %d)", url, system.get_system_id())
+
+    def _autopilot_with_id(self, system_id: int, timeout_s: float) -> Any:
+        """The autopilot with this system id; VehicleConnectionError naming any other that answered."""
+        assert self._mavsdk is not None
+        deadline = time.monotonic() + timeout_s
+        others: set[int] = set()
+        while time.monotonic() < deadline:
+            for system in self._mavsdk.get_systems():
+                sid = system.get_system_id()
+                if sid == system_id and system.has_autopilot():
+                    return system
+                if sid != system_id:
+                    others.add(sid)
+            time.sleep(0.05)
+        if others:
+            self.close()
+            raise VehicleConnectionError(
+                "connect()",
+                "WRONG_VEHICLE",
+                f"{self.config.url}: heard system id {sorted(others)} but not {system_id}, the vehicle "
+                "this run launched: refusing to fly another vehicle",
+            )
+        return None
 
     def _subscribe(self, system: Any, tel: MavsdkTelemetry) -> None:
         def store(fn: Callable[[Any], None]) -> Callable[[Any, Any], None]:
@@ -165,6 +214,9 @@ class MavsdkVehicle(Vehicle):
 
         def attitude(d: Any) -> None:
             self._attitude = (d.roll_deg, d.pitch_deg, d.yaw_deg)
+            stamp_s = d.timestamp_us * 1e-6 if d.timestamp_us else math.nan
+            if not stamp_s <= self._vehicle_time_s:  # the first stamp, or a newer one (never backwards)
+                self._vehicle_time_s = stamp_s
 
         def health(d: Any) -> None:
             self._local_position_ok, self._home_ok = d.is_local_position_ok, d.is_home_position_ok
@@ -221,10 +273,18 @@ class MavsdkVehicle(Vehicle):
             return "; ".join(list(self._texts)[len(self._texts) - new :]) if new > 0 else ""
 
     def time_s(self) -> float:
+        if self.config.clock == "vehicle":
+            return self._vehicle_time_s  # one float, written whole by the MAVSDK thread: no lock needed
         return time.monotonic()
 
     def sleep(self, seconds: float) -> None:
-        time.sleep(max(0.0, seconds))
+        if self.config.clock == "wall":
+            time.sleep(max(0.0, seconds))
+            return
+        until = self.time_s() + seconds
+        while self.time_s() < until:
+            self._link.check("sleep()")  # a frozen vehicle clock ends here, as a lost link
+            time.sleep(0.002)
 
     def _wait(
         self, predicate: Callable[[Telemetry], bool], timeout_s: float, origin: str, what: str
@@ -233,14 +293,27 @@ class MavsdkVehicle(Vehicle):
 
     # --- commands -----------------------------------------------------------------------------
     def wait_ready(self, timeout_s: float | None = None) -> None:
-        def ready(t: Telemetry) -> bool:
-            with self._lock:
-                ok = self._local_position_ok and self._home_ok
-            return ok and math.isfinite(t.position_ned.down_m) and math.isfinite(t.attitude.yaw_deg)
+        """Wait for PX4's estimator: a local position and a home position (PX4 SITL with SIH: 31-35 s)."""
+        timeout_s = timeout_s or self.config.timeouts.ready_s
+        start = self.time_s()
+        next_report = start + READY_REPORT_EVERY_S
 
-        telemetry = self._wait(
-            ready, timeout_s or self.config.timeouts.ready_s, "wait_ready()", "local position + home"
-        )
+        def ready(t: Telemetry) -> bool:
+            nonlocal next_report
+            with self._lock:
+                position_ok, home_ok = self._local_position_ok, self._home_ok
+            ok = position_ok and home_ok and math.isfinite(t.position_ned.down_m)
+            ok = ok and math.isfinite(t.attitude.yaw_deg)
+            if not ok and self.time_s() >= next_report:
+                next_report += READY_REPORT_EVERY_S
+                log.info(
+                    "waiting for the vehicle's estimator (%.0f of %.0f s): local position %s, home %s",
+                    self.time_s() - start, timeout_s, "ok" if position_ok else "not yet",
+                    "ok" if home_ok else "not yet",
+                )  # fmt: skip
+            return ok
+
+        telemetry = self._wait(ready, timeout_s, "wait_ready()", "local position + home")
         self._ground_down_m = telemetry.position_ned.down_m
 
     def arm(self, timeout_s: float | None = None) -> None:

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
-from flight.errors import FlightError
+from flight.errors import FlightError, LinkLostError
 from flight.types import PositionNed, Telemetry, VelocityBody
 from flight.vehicle import Vehicle
 from sim_world.frames import heading_to_world_ned, world_ned_to_heading
@@ -34,7 +34,7 @@ class FlightTimeouts:
     """A timeout for every wait on a vehicle, in seconds of the vehicle's clock."""
 
     connect_s: float = 15.0
-    ready_s: float = 30.0
+    ready_s: float = 60.0  # PX4 SITL with SIH: estimator ready 31-35 s after boot
     arm_s: float = 15.0
     takeoff_s: float = 30.0
     mode_change_s: float = 5.0
@@ -130,6 +130,7 @@ def clip_geofence(
     yaw_rad = math.radians(telemetry.attitude.yaw_deg)
     north, east = heading_to_world_ned(velocity.forward_m_s, velocity.right_m_s, yaw_rad)
     components = [north, east, velocity.down_m_s]
+    clipped = False
     position = telemetry.position_ned
     for axis, (value, (low, high)) in enumerate(
         zip((position.north_m, position.east_m, position.down_m), fence.bounds(origin), strict=True)
@@ -137,12 +138,23 @@ def clip_geofence(
         predicted = value + components[axis] * fence.lookahead_s
         if (predicted > high and components[axis] > 0.0) or (predicted < low and components[axis] < 0.0):
             components[axis] = 0.0
+            clipped = True
+    if not clipped:
+        return velocity  # unchanged (not re-rotated: a round trip through the heading is not exact)
     forward, right = world_ned_to_heading(components[0], components[1], yaw_rad)
     return VelocityBody(forward, right, components[2], velocity.yawspeed_deg_s)
 
 
 def safe_stop(vehicle: Vehicle) -> None:
-    """Best effort: hold, leave offboard, land if in the air, disarm; failures are logged, not raised."""
+    """Best effort: hold, leave offboard, land if in the air, disarm; failures are logged, not raised.
+
+    A vehicle that no longer answers gets no commands (each would only time out): the stop ends at once.
+    """
+    try:
+        vehicle.telemetry()
+    except LinkLostError as exc:
+        log.error("safe stop: the vehicle is not answering (%s); nothing can be commanded from here", exc)
+        return
     steps = (("hold", vehicle.hold), ("stop offboard", vehicle.stop_offboard))
     for name, step in steps:
         try:

@@ -60,6 +60,11 @@ class QuadrotorParams:
     - ``body_half_extents_m`` (0.2, 0.2, 0.05): the collision box (props included
       in x/y, body plus landing feet in z). The centre of mass sits at its centre,
       so a landed drone's base is at z = 0.05 m above the ground.
+    - ``landing_gear_stiffness_n_m`` None: PyBullet's rigid contact (the built-in
+      autopilot lands softly enough). A number makes the ground contact a spring-damper
+      (``landing_gear_damping_ratio``), as real landing legs are: a touchdown then
+      decelerates over tens of milliseconds instead of one physics step, so an IMU
+      (PX4's, through `sim_world.px4_bridge`) sees a few g, not a clipped spike.
     """
 
     mass_kg: float = 1.0
@@ -71,6 +76,8 @@ class QuadrotorParams:
     max_rotor_speed_rad_s: float = 1100.0
     drag_coeff_xyz: tuple[float, float, float] = (0.25, 0.25, 0.35)
     body_half_extents_m: tuple[float, float, float] = (0.2, 0.2, 0.05)
+    landing_gear_stiffness_n_m: float | None = None
+    landing_gear_damping_ratio: float = 0.7
 
     def __post_init__(self) -> None:
         positive = {
@@ -90,6 +97,13 @@ class QuadrotorParams:
         ):
             if len(vec) != 3 or not all(v > 0.0 for v in vec):
                 raise ValueError(f"QuadrotorParams.{name} must be three values > 0, got {vec}")
+        if self.landing_gear_stiffness_n_m is not None and not self.landing_gear_stiffness_n_m > 0.0:
+            raise ValueError(
+                "QuadrotorParams.landing_gear_stiffness_n_m must be > 0 or None, "
+                f"got {self.landing_gear_stiffness_n_m}"
+            )
+        if not self.landing_gear_damping_ratio >= 0.0:
+            raise ValueError("QuadrotorParams.landing_gear_damping_ratio must be >= 0")
         if len(self.drag_coeff_xyz) != 3 or any(c < 0.0 for c in self.drag_coeff_xyz):
             raise ValueError(
                 f"QuadrotorParams.drag_coeff_xyz must be three values >= 0, got {self.drag_coeff_xyz}"
@@ -228,6 +242,17 @@ class Quadrotor:
             activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING,
             physicsClientId=cid,
         )
+        if prm.landing_gear_stiffness_n_m is not None:
+            damping = (
+                2.0 * prm.landing_gear_damping_ratio * math.sqrt(prm.landing_gear_stiffness_n_m * prm.mass_kg)
+            )
+            p.changeDynamics(
+                body,
+                -1,
+                contactStiffness=prm.landing_gear_stiffness_n_m,
+                contactDamping=damping,
+                physicsClientId=cid,
+            )
         return body
 
     @property
@@ -268,6 +293,10 @@ class Quadrotor:
         )
         p.resetBaseVelocity(self.body_id, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=cid)
         self._rotor_speeds = [self._hover_speed] * 4
+
+    def stop_rotors(self) -> None:
+        """Rotors at rest (a vehicle booting on the ground under an external autopilot)."""
+        self._rotor_speeds = [0.0] * 4
 
     def apply(
         self,

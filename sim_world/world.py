@@ -120,6 +120,15 @@ class World:
             p.stepSimulation(physicsClientId=cid)
             self.time_s += dt
 
+    def step_rotors(self, rotor_speed_cmd_rad_s: list[float], n: int = 1) -> None:
+        """Advance n physics steps with rotor speed commands from outside (an external autopilot:
+        PX4 through `sim_world.px4_bridge`); the built-in autopilot is bypassed."""
+        cid, dt = self.client_id, self.dt_s
+        for _ in range(n):
+            self.drone.apply(rotor_speed_cmd_rad_s, dt, self.wind.velocity_enu_m_s(self.time_s))
+            p.stepSimulation(physicsClientId=cid)
+            self.time_s += dt
+
     def run_for(self, seconds: float) -> None:
         """Advance simulated time by `seconds` (rounded to whole physics steps)."""
         self.step(max(0, round(seconds / self.dt_s)))

@@ -80,8 +80,21 @@ def test_move_command_flies_the_in_process_backend(capsys: pytest.CaptureFixture
 def test_move_command_explains_a_bad_url(capsys: pytest.CaptureFixture[str]) -> None:
     from tools.move_cmd import main
 
-    assert main(["--vehicle", "udpin://localhost:14540"]) == 1
+    assert main(["--vehicle", "udpin://localhost:14540", "--right-m", "0.5"]) == 1
     assert "udpin://127.0.0.1:14540" in capsys.readouterr().err
+
+
+def test_move_command_flies_only_the_axes_given(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`--forward-m 0.5` is a forward move only (it used to add the default 0.5 m right)."""
+    import tools.move_cmd as move_cmd
+
+    flown = []
+    monkeypatch.setattr(move_cmd, "fly_move", lambda vehicle, flight, limits: flown.append(flight) or 1 / 0)
+    with pytest.raises(ZeroDivisionError):  # stop right after the flight plan was handed over
+        move_cmd.main(["--vehicle", "sim", "--forward-m", "0.5"])
+    assert (flown[0].forward_m, flown[0].right_m, flown[0].down_m) == (0.5, 0.0, 0.0)
+    with pytest.raises(SystemExit):  # no move at all: a usage error, not a silent default
+        move_cmd.main(["--vehicle", "sim"])
 
 
 def test_sleep_never_ends_early_and_always_advances_the_clock(vehicle: PyBulletVehicle) -> None:

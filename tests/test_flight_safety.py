@@ -196,3 +196,37 @@ def test_watchdog_gives_up_quietly_when_offboard_is_already_lost() -> None:
     vehicle.set_velocity_body(VelocityBody(0.0, 0.5))
     vehicle.sleep(1.0)
     assert vehicle.watchdog_trips == 1  # tried once, then stopped trying
+
+
+def test_limited_is_logged_only_when_a_command_is_limited(caplog: pytest.LogCaptureFixture) -> None:
+    fence = GeofenceBox(half_width_north_m=5.0, half_width_east_m=5.0, max_up_m=4.0)
+    fake = FakeVehicle(yaw_deg=37.0)  # a heading whose round trip through NED is not exact
+    vehicle = flying(fake, SafetyLimits(max_horizontal_speed_m_s=1.0, geofence=fence))
+    with caplog.at_level("INFO", logger="flight.safe_vehicle"):
+        vehicle.set_velocity_body(VelocityBody(0.1, 0.7, 0.1))  # inside every limit
+        assert "limited" not in caplog.text
+        assert fake.commands[-1] == VelocityBody(0.1, 0.7, 0.1)  # passed on unchanged, bit for bit
+        vehicle.set_velocity_body(VelocityBody(3.0, 4.0))
+        assert "limited to" in caplog.text
+
+
+def test_sigterm_and_sighup_stop_like_ctrl_c_and_a_second_signal_does_not_abort_the_stop() -> None:
+    import os
+    import signal
+
+    from flight.signals import StopRequested, stop_signals_as_interrupt
+
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        landed = []
+        with pytest.raises(StopRequested) as info, stop_signals_as_interrupt():
+            try:
+                os.kill(os.getpid(), signum)
+                time.sleep(1.0)  # the handler raises here
+            finally:
+                os.kill(os.getpid(), signal.SIGINT)  # a second signal while "landing": ignored
+                time.sleep(0.05)
+                landed.append(True)
+        assert isinstance(info.value, KeyboardInterrupt)
+        assert info.value.signal_name == signal.Signals(signum).name
+        assert landed == [True]
+    assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL  # handlers restored after the block

@@ -1,4 +1,4 @@
-"""`dronectl bench sim|perception|flight [options]`: the speed benchmarks.
+"""`dronectl bench sim|perception|flight|px4 [options]`: the speed benchmarks.
 
 Each benchmark lives with the code it measures, in a module exposing
 `bench_main(argv: list[str]) -> int`; this command only picks the module (imported
@@ -15,6 +15,7 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "sim": ("sim_world.bench", "physics and camera real-time factors, render times, collection throughput"),
     "perception": ("perception.bench", "detector latency, stream-camera latency, detector accuracy"),
     "flight": ("flight.bench", "vehicle command and telemetry latency"),
+    "px4": ("flight.bench_px4", "real PX4 SITL in lockstep: readiness, hover drift, lockstep speed"),
 }
 
 

@@ -14,9 +14,20 @@ import argparse
 import json
 import logging
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from controller.benchmark_missions import BenchmarkConfig, format_summary, run_benchmark
+from sim_world.px4_bridge.px4_process import Px4FolderError, find_px4_dir
+
+
+def _speed(text: str) -> float | str:
+    if text.strip().lower() == "max":
+        return "max"
+    try:
+        return float(text)
+    except ValueError:
+        raise ValueError(f"--px4-speed must be a number or 'max', got {text!r}") from None
 
 
 def main(argv: list[str]) -> int:
@@ -28,7 +39,16 @@ def main(argv: list[str]) -> int:
         default="latent,classic,random,oracle",
         help="comma-separated planners (default: %(default)s)",
     )
-    parser.add_argument("--vehicle", default="sim", choices=("sim", "sim-mavlink"), help="in-process or HIL")
+    parser.add_argument(
+        "--vehicle",
+        default="sim",
+        choices=("sim", "sim-mavlink", "px4-sitl"),
+        help="in-process, the sim-vehicle over MAVLink, or real PX4 SITL flying the world",
+    )
+    parser.add_argument("--px4", help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
+    parser.add_argument(
+        "--px4-speed", default="max", help="px4-sitl: simulation speed, a factor or 'max' (default: max)"
+    )
     parser.add_argument("--checkpoint", help="latent planner checkpoint folder (default: the shipped one)")
     parser.add_argument("--max-steps", type=int, default=20, help="step budget per mission (default: 20)")
     parser.add_argument("--epsilon-px", type=float, help="ε in pixels (default: 10 at 224 px)")
@@ -53,7 +73,13 @@ def main(argv: list[str]) -> int:
             vehicle=args.vehicle, max_steps=args.max_steps, epsilon_px=args.epsilon_px,
             checkpoint=args.checkpoint, detector=args.detector, parallel=args.parallel,
             detector_checkpoint=args.detector_checkpoint, scale_moves=not args.fixed_moves,
+            px4_dir=args.px4, px4_speed=_speed(args.px4_speed),
         )  # fmt: skip
+        if config.vehicle == "px4-sitl":  # a missing PX4 folder is named before anything flies
+            config = replace(config, px4_dir=str(find_px4_dir(config.px4_dir)))
+    except Px4FolderError as exc:
+        print(f"dronectl benchmark-missions: {exc}", file=sys.stderr)
+        return 2
     except ValueError as exc:
         parser.error(str(exc))
     summary = run_benchmark(config, report_dir=args.report)

@@ -12,12 +12,15 @@ import importlib
 import logging
 import sys
 
+from flight.signals import stop_signals_as_interrupt
+
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("tools.demo_cmd", "fly a short scripted demo in the simulated world and save camera frames"),
     "collect": ("tools.collect_cmd", "collect a goal/sector/test image dataset in the simulated world"),
     "bench": ("tools.bench_cmd", "benchmarks: `bench sim|perception|flight`"),
     "sim-vehicle": ("tools.sim_vehicle_cmd", "serve the simulated drone as a PX4-flavoured MAVLink vehicle"),
+    "px4-sim": ("tools.px4_sim_cmd", "real PX4 SITL flying the simulated drone (lockstep), camera as MJPEG"),
     "move": ("tools.move_cmd", "connect to a vehicle, take off, fly one discrete move, land"),
     "train-detector": ("tools.train_detector_cmd", "train the image-based target detector"),
     "train": ("tools.train_cmd", "train the latent dynamics planner"),
@@ -49,9 +52,10 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     module = importlib.import_module(COMMANDS[name][0])
     try:
-        return int(module.main(rest) or 0)
-    except KeyboardInterrupt:
-        print("dronectl: interrupted", file=sys.stderr)
+        with stop_signals_as_interrupt():  # SIGTERM / SIGHUP end a flight as Ctrl-C does
+            return int(module.main(rest) or 0)
+    except KeyboardInterrupt as exc:
+        print(f"dronectl: interrupted ({exc or 'SIGINT'})", file=sys.stderr)
         return 130
 
 

@@ -7,6 +7,9 @@ with the shipped latent planner checkpoint:
     dronectl fly --mission missions/sector_ne.yaml --planner classic --out runs/fly/ne
     dronectl fly --seed 7 --epsilon-px 6
 
+Real PX4 firmware (SITL) flying the simulated world: `--vehicle px4-sitl --px4 DIR`
+(DIR: a PX4 SITL build folder, default $PX4_SITL_DIR).
+
 A real vehicle: a mission file with `vehicle: udpin://0.0.0.0:14540` and
 `camera: http://<drone>:8080/stream.mjpg` (or the same as --vehicle/--camera).
 Exit status 0 when the mission's expectations hold, 1 when they do not, 2 on a
@@ -22,7 +25,14 @@ import time
 from pathlib import Path
 from typing import Any
 
-from controller.mission_schema import PLANNER_NAMES, MissionFileError, load_mission
+from controller.mission_schema import (
+    PLANNER_NAMES,
+    PX4_SITL,
+    Mission,
+    MissionFileError,
+    Px4Spec,
+    load_mission,
+)
 from controller.missions import MissionResult
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "default.yaml"
@@ -35,6 +45,29 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
         if value is not None:
             out[key] = value
     return out
+
+
+def _px4_options(mission: Mission, args: argparse.Namespace) -> Mission:
+    """Apply --px4 / --px4-speed (px4-sitl only), resolving the PX4 folder now: a bad one is named at once."""
+    if mission.vehicle != PX4_SITL and args.px4 is None and args.px4_speed is None:
+        return mission
+    from sim_world.px4_bridge.px4_process import find_px4_dir  # the simulator only when it is flown
+
+    if args.px4 is None and args.px4_speed is None:
+        if mission.vehicle == PX4_SITL:
+            find_px4_dir(mission.px4.dir)
+        return mission
+    if mission.vehicle != PX4_SITL:
+        raise ValueError(
+            f"--px4 and --px4-speed go with --vehicle px4-sitl (the vehicle is {mission.vehicle!r})"
+        )
+    update: dict[str, Any] = {}
+    if args.px4 is not None or mission.px4.dir is not None:
+        update["dir"] = str(find_px4_dir(args.px4 if args.px4 is not None else mission.px4.dir))
+    if args.px4_speed is not None:
+        update["speed"] = args.px4_speed if args.px4_speed == "max" else float(args.px4_speed)
+    px4 = Px4Spec.model_validate({**mission.px4.model_dump(), **update})
+    return mission.model_copy(update={"px4": px4})
 
 
 def summary_lines(result: MissionResult) -> list[str]:
@@ -75,18 +108,25 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--seed", type=int, help="override the scene seed (and a random start's seed)")
     parser.add_argument("--epsilon-px", type=float, help="override ε, pixels")
     parser.add_argument("--max-steps", type=int, help="override the step budget")
-    parser.add_argument("--vehicle", help="override the vehicle: sim, sim-mavlink or a MAVLink URL")
+    parser.add_argument("--vehicle", help="override the vehicle: sim, sim-mavlink, px4-sitl or a MAVLink URL")
+    parser.add_argument("--px4", type=Path, help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
+    parser.add_argument(
+        "--px4-speed",
+        help="px4-sitl: simulated seconds per wall second, or 'max' (default: the mission's, 1)",
+    )
     parser.add_argument("--camera", help="override the camera: sim or a stream URL")
     parser.add_argument("--out", type=Path, help="report folder (default: runs/fly/<mission>-<time>)")
     parser.add_argument("-v", "--verbose", action="store_true", help="log every module's progress")
     args = parser.parse_args(argv)
     if not args.verbose:
         logging.getLogger().setLevel(logging.WARNING)
+        logging.getLogger("flight.mavsdk_backend").setLevel(logging.INFO)  # what a wait is waiting for
     try:
         mission = load_mission(args.mission, _overrides(args))
         if args.seed is not None:
             mission = mission.with_seed(args.seed)
-    except MissionFileError as exc:
+        mission = _px4_options(mission, args)
+    except (MissionFileError, ValueError) as exc:
         print(f"dronectl fly: {exc}", file=sys.stderr)
         return 2
     out = args.out or Path("runs") / "fly" / f"{mission.name}-{time.strftime('%Y%m%d-%H%M%S')}"

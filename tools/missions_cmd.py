@@ -36,6 +36,9 @@ def main(argv: list[str]) -> int:
         "--detector", choices=("image", "truth"), help="truth: sim truth (in-process only; debugging)"
     )
     run.add_argument("--checkpoint", help="fly every latent mission with this planner checkpoint")
+    run.add_argument(
+        "--px4", type=Path, help="PX4 SITL build folder for px4-sitl missions (default: $PX4_SITL_DIR)"
+    )
     run.add_argument("-v", "--verbose", action="store_true", help="log every module's progress")
     args = parser.parse_args(argv)
     if not args.verbose:
@@ -50,6 +53,7 @@ def main(argv: list[str]) -> int:
             overrides=overrides,
             tags=tuple(args.tag),
             exclude_tags=tuple(args.skip_tag),
+            px4_dir=None if args.px4 is None else str(args.px4.resolve()),
         )
         suite = run_suite(args.directory, options)
     except (MissionFileError, ValueError) as exc:

@@ -28,7 +28,7 @@ def main(argv: list[str]) -> int:
         help=f"a MAVSDK URL (udpin://0.0.0.0:14540, serial:///dev/ttyACM0:57600) or {SIM_VEHICLE!r} "
         "for the in-process PyBullet backend (default: %(default)s)",
     )
-    parser.add_argument("--right-m", type=float, default=0.5, help="move right (negative: left), m")
+    parser.add_argument("--right-m", type=float, default=0.0, help="move right (negative: left), m")
     parser.add_argument("--forward-m", type=float, default=0.0, help="move forward (negative: back), m")
     parser.add_argument("--down-m", type=float, default=0.0, help="move down (negative: up), m")
     parser.add_argument("--speed", type=float, default=0.25, help="move speed, m/s (default: %(default)s)")
@@ -38,6 +38,10 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--max-speed", type=float, default=1.0, help="safety limit on horizontal speed, m/s")
     parser.add_argument("--seed", type=int, default=0, help="world seed for --vehicle sim")
     args = parser.parse_args(argv)
+    if args.right_m == 0.0 and args.forward_m == 0.0 and args.down_m == 0.0:
+        parser.error(
+            "give the move: at least one of --right-m, --forward-m, --down-m (an axis not given is 0)"
+        )
     try:
         flight = MoveFlight(
             right_m=args.right_m,

@@ -50,6 +50,15 @@ class VideoConfig:
     fps: float = 15.0
     jpeg_quality: int = 85
     start_timeout_s: float = 60.0  # a fresh interpreter importing pybullet and building the scene
+    clock: str = "wall"
+    """"wall": render the latest pose `fps` times per wall second (sim-vehicle, paced to the wall
+    clock); "sim": render each `capture()` once, the caller capturing `fps` times per simulated
+    second (the PX4 bridge, which may run faster or slower than real time)."""
+    max_behind_s: float = 1.0  # "sim" clock: how long capture() waits for the previous frame
+
+    def __post_init__(self) -> None:
+        if self.clock not in ("wall", "sim"):
+            raise ValueError(f"VideoConfig.clock must be 'wall' or 'sim', got {self.clock!r}")
 
 
 class WorldVideoFeed:
@@ -68,12 +77,18 @@ class WorldVideoFeed:
         self._frames = ctx.Value("q", 0, lock=False)
         self._render_s = ctx.Value("d", 0.0, lock=False)
         self._stop = ctx.Value("b", 0, lock=False)
+        self._requested = ctx.Value("q", 0, lock=False)  # "sim" clock: captures so far
         self._conn, self._child_conn = ctx.Pipe(duplex=False)
-        self.capture()
+        self._write_pose()
         self._proc = ctx.Process(
             target=_serve,
             args=(world.config, world.seed, np.asarray(origin_enu_m, float), config, self._pose, self._stop),
-            kwargs={"conn": self._child_conn, "frames": self._frames, "render_s": self._render_s},
+            kwargs={
+                "conn": self._child_conn,
+                "frames": self._frames,
+                "render_s": self._render_s,
+                "requested": self._requested,
+            },
             name="sim-vehicle-video",
             daemon=True,
         )
@@ -107,17 +122,34 @@ class WorldVideoFeed:
         log.info("video %s (render process %d)", self.stream_url, self._proc.pid)
 
     def capture(self) -> None:
-        """Hand the drone's current pose to the render process (cheap: no rendering here)."""
+        """Hand the drone's current pose to the render process (cheap: no rendering here).
+
+        With the "sim" clock each capture is one frame: first wait (bounded) until the frame
+        asked for last is out, so the stream keeps `fps` frames per simulated second.
+        """
+        if self.config.clock == "sim":
+            deadline = time.monotonic() + self.config.max_behind_s
+            while self._frames.value < self._requested.value and time.monotonic() < deadline:
+                if not self._proc.is_alive():
+                    break
+                time.sleep(0.0005)
+            if self._write_pose():
+                self._requested.value += 1
+        else:
+            self._write_pose()
+
+    def _write_pose(self) -> bool:
         s = self._world.state()
         values = [*s.position_enu_m, *s.quaternion_xyzw, *s.velocity_enu_m_s, self._world.time_s]
         lock = self._pose.get_lock()
         if not lock.acquire(timeout=POSE_LOCK_TIMEOUT_S):  # the renderer died holding it: skip
             log.debug("video pose lock not free within %.2f s; frame pose not updated", POSE_LOCK_TIMEOUT_S)
-            return
+            return False
         try:
             self._pose[:] = values
         finally:
             lock.release()
+        return True
 
     @property
     def alive(self) -> bool:
@@ -144,8 +176,9 @@ def _serve(
     conn: Connection,
     frames: Any,
     render_s: Any,
+    requested: Any,
 ) -> None:
-    """The render process: same scene, drone posed from `pose`, frames at `config.fps`."""
+    """The render process: same scene, drone posed from `pose`, frames at `config.fps` (see `clock`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent stops us
     try:
         world = World(world_config, seed)
@@ -165,7 +198,13 @@ def _serve(
             parent = os.getppid()
             # A vehicle killed outright never sets `stop` (and `daemon=True` only acts on a normal
             # exit): re-parenting means it is gone, so stop rather than render for nobody forever.
+            sim_clock = config.clock == "sim"
             while not stop.value and os.getppid() == parent:
+                if sim_clock:
+                    if requested.value <= frames.value:  # nothing new to draw
+                        time.sleep(0.0005)
+                        continue
+                    frames_wanted = requested.value
                 t0 = time.monotonic()
                 with pose.get_lock():
                     values = list(pose)
@@ -175,6 +214,9 @@ def _serve(
                 render = world.render(with_seg=True)
                 server.publish(render.rgb, frame_truth(world, render, values, origin_enu_m))
                 render_s.value += time.monotonic() - t0
+                if sim_clock:
+                    frames.value = frames_wanted  # (a capture that raced this frame is drawn next)
+                    continue
                 frames.value += 1
                 next_t = max(next_t + period, time.monotonic())
                 while not stop.value and (left := next_t - time.monotonic()) > 0:

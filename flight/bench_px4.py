@@ -1,0 +1,166 @@
+"""`dronectl bench px4`: real PX4 SITL in lockstep with the PyBullet world, measured through MAVSDK.
+
+Three runs of `python -m sim_world.px4_bridge` (instance N), each flown by MAVSDK on
+the vehicle clock (PX4's own, i.e. simulated time), with the 224 px camera at 30 frames
+per simulated second (what a mission uses) unless said otherwise:
+
+1. at 1× real time (so that the time MAVSDK needs to connect does not count as PX4's):
+   PX4 start → lockstep (wall), PX4's estimator ready (local position and home) in
+   simulated time since the bridge started, arm, take off to 1.5 m, then a hover of
+   `hover_s` simulated seconds: the drift per simulator truth (`/truth.json`, the
+   largest distance from the hover's first position);
+2. at `--speed max`: the same hover's lockstep speed (simulated seconds per wall second);
+3. at `--speed max` without the camera: that speed again.
+
+Targets (issue 10): ready ≤ 15 s simulated, speed ≥ 1.5× with the camera and ≥ 5×
+without, drift ≤ 0.3 m over 30 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+from typing import Any
+
+from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+from flight.safe_vehicle import SafeVehicle
+from flight.safety import flight_guard
+from flight.sim_launcher import SimulatorProcess
+from sim_world.px4_bridge.bridge import PX4_CLOCK_OFFSET_US, BridgeTiming
+from sim_world.px4_bridge.px4_process import find_px4_dir
+from sim_world.px4_bridge.run import READY_PREFIX, Px4SimConfig, config_to_json
+
+log = logging.getLogger(__name__)
+
+TARGETS = {"ready_sim_s": 15.0, "speed_camera_x": 1.5, "speed_no_camera_x": 5.0, "hover_drift_m": 0.3}
+CLOCK_OFFSET_S = PX4_CLOCK_OFFSET_US / 1e6
+
+
+def _truth_position(url: str) -> tuple[float, float, float]:
+    with urllib.request.urlopen(url, timeout=2.0) as response:
+        north, east, down = json.loads(response.read())["truth"]["drone"]["position_ned_m"]
+    return float(north), float(east), float(down)
+
+
+def hover_run(
+    px4_dir: Path, instance: int, camera: bool, hover_s: float, workdir: Path, speed: float | None
+) -> dict[str, Any]:
+    """One PX4 run: readiness, takeoff, a hover; the numbers of the module docstring."""
+    config = Px4SimConfig(
+        px4_dir=px4_dir,
+        instance=instance,
+        camera=camera,
+        video_port=18950 + instance,
+        timing=BridgeTiming(speed=speed),
+        system_id=77,
+    )
+    t0 = time.perf_counter()
+    label = ("camera" if camera else "no-camera") + ("-max" if speed is None else f"-x{speed:g}")
+    with SimulatorProcess(
+        "sim_world.px4_bridge", config_to_json(config), workdir / f"px4_sim_{label}.log", READY_PREFIX
+    ) as sim:
+        lockstep_wall_s = time.perf_counter() - t0
+        url = f"udpin://127.0.0.1:{config.mavlink_url.rsplit(':', 1)[1]}"
+        with MavsdkVehicle(MavsdkConfig(url=url, expected_system_id=77, clock="vehicle")) as vehicle:
+            safe = SafeVehicle(vehicle)
+            safe.connect()
+            with flight_guard(safe):
+                safe.wait_ready()
+                ready_sim_s = safe.time_s() - CLOCK_OFFSET_S
+                safe.arm()
+                safe.takeoff(1.5)
+                safe.sleep(3.0)  # let the takeoff's overshoot settle
+                truth_url = sim.ready.get("truth_url")
+                start = _truth_position(truth_url) if truth_url else None
+                drift = 0.0
+                sim0, wall0 = safe.time_s(), time.perf_counter()
+                while safe.time_s() - sim0 < hover_s:
+                    safe.sleep(0.25)
+                    if start is not None:
+                        drift = max(drift, math.dist(start, _truth_position(truth_url)))
+                speed = (safe.time_s() - sim0) / (time.perf_counter() - wall0)
+                safe.land()
+                safe.disarm()
+    return {
+        "camera": camera,
+        "speed": "max" if speed is None else speed,
+        "start_to_lockstep_wall_s": round(lockstep_wall_s, 2),
+        "ready_sim_s": round(ready_sim_s, 2),
+        "hover_sim_s": hover_s,
+        "hover_drift_m": round(drift, 3) if camera else None,
+        "speed_x": round(speed, 2),
+    }
+
+
+def run_px4_bench(px4_dir: Path, instance: int = 8, hover_s: float = 30.0) -> dict[str, Any]:
+    with tempfile.TemporaryDirectory(prefix="bench-px4-") as tmp:
+        real_time = hover_run(px4_dir, instance, True, hover_s, Path(tmp), speed=1.0)
+        with_camera = hover_run(px4_dir, instance, True, hover_s, Path(tmp), speed=None)
+        without = hover_run(px4_dir, instance, False, hover_s, Path(tmp), speed=None)
+    measured = {
+        "ready_sim_s": real_time["ready_sim_s"],
+        "speed_camera_x": with_camera["speed_x"],
+        "speed_no_camera_x": without["speed_x"],
+        "hover_drift_m": real_time["hover_drift_m"],
+    }
+    met = {
+        "ready_sim_s": measured["ready_sim_s"] <= TARGETS["ready_sim_s"],
+        "speed_camera_x": measured["speed_camera_x"] >= TARGETS["speed_camera_x"],
+        "speed_no_camera_x": measured["speed_no_camera_x"] >= TARGETS["speed_no_camera_x"],
+        "hover_drift_m": measured["hover_drift_m"] <= TARGETS["hover_drift_m"],
+    }
+    return {
+        "px4_dir": str(px4_dir),
+        "real_time": real_time,
+        "with_camera": with_camera,
+        "without_camera": without,
+        "measured": measured,
+        "targets": TARGETS,
+        "target_met": met,
+    }
+
+
+def bench_main(argv: list[str]) -> int:
+    """`dronectl bench px4 [--px4 DIR] [--instance N] [--hover-s S] [--json FILE]`; 0: all targets met."""
+    parser = argparse.ArgumentParser(prog="dronectl bench px4", description=__doc__.splitlines()[0])
+    parser.add_argument("--px4", type=Path, help="PX4 SITL build folder (default: $PX4_SITL_DIR)")
+    parser.add_argument("--instance", type=int, default=8, help="PX4 instance (default %(default)s)")
+    parser.add_argument("--hover-s", type=float, default=30.0, help="hover length, simulated seconds")
+    parser.add_argument("--json", type=Path, help="also write the numbers to this JSON file")
+    args = parser.parse_args(argv)
+    try:
+        px4_dir = find_px4_dir(args.px4)
+    except ValueError as exc:
+        parser.error(str(exc))
+    report = run_px4_bench(px4_dir, args.instance, args.hover_s)
+    r, w, n, met = report["real_time"], report["with_camera"], report["without_camera"], report["target_met"]
+
+    def ok(name: str) -> str:
+        return "ok" if met[name] else "MISSED"
+
+    print(f"PX4 SITL benchmark ({px4_dir}, instance {args.instance}, 224 px camera at 30 Hz unless said)")
+    print(
+        f"  1x real time: PX4 start -> lockstep {r['start_to_lockstep_wall_s']:.2f} s wall; estimator ready "
+        f"(local position + home) after {r['ready_sim_s']:.2f} s simulated  "
+        f"[target <= 15 s: {ok('ready_sim_s')}]"
+    )
+    print(
+        f"  1x real time: hover {r['hover_sim_s']:.0f} s, drift per truth {r['hover_drift_m']:.3f} m "
+        f"[target <= 0.3 m: {ok('hover_drift_m')}]"
+    )
+    print(f"  --speed max, hover: x{w['speed_x']:.2f} real time  [target >= 1.5: {ok('speed_camera_x')}]")
+    print(
+        f"  --speed max, hover without camera: x{n['speed_x']:.2f} real time  "
+        f"[target >= 5: {ok('speed_no_camera_x')}]"
+    )
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report, indent=2) + "\n")
+        print(f"wrote {args.json}")
+    return 0 if all(met.values()) else 1

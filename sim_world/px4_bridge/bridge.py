@@ -1,0 +1,262 @@
+"""`Px4Bridge`: the lockstep loop between the PyBullet world and PX4 SITL.
+
+Each tick of `sensor_period_s` (4 ms) of simulated time:
+
+1. read the truth (pose, velocity, the acceleration over the last tick, body rates);
+2. send HIL_SENSOR at the tick's time (IMU always, magnetometer and barometer at
+   their rates), HIL_GPS every `gps_period_s`, HIL_STATE_QUATERNION as truth;
+3. wait for PX4's HIL_ACTUATOR_CONTROLS for that time (lockstep: PX4's clock is the
+   sensor time, so PX4 never misses a deadline however slow this loop is);
+4. turn the motor outputs into rotor speed commands and step the physics one tick;
+5. hand the pose to the camera every 1/`camera_fps` of simulated time;
+6. with a finite `speed`, sleep until the wall clock catches up (× speed).
+
+Before PX4's first answer (it is still booting) the loop waits a short while for
+each answer and then goes on with the motors off, so boot does not stall.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import pybullet as p
+from pymavlink.dialects.v20 import common as mavlink
+
+from sim_world.frames import enu_to_ned
+from sim_world.px4_bridge.geodesy import HomePoint
+from sim_world.px4_bridge.link import Px4DisconnectedError, SimulatorServer
+from sim_world.px4_bridge.messages import ActuatorCommand, HilEncoder, RotorMapping
+from sim_world.px4_bridge.sensors import SensorSuite, Truth
+from sim_world.world import World
+
+log = logging.getLogger(__name__)
+
+PX4_CLOCK_OFFSET_US = 20_000_000
+"""PX4's clock = simulated time + 20 s. Started near 0, PX4's first integrated IMU sample spans
+everything since 0 and EKF2 began with ~1.8 m/s of vertical velocity on a vehicle at rest
+(its height then settled 0.5-1 m off); Gazebo's world clock is well past 0 when PX4 connects."""
+_ENU_TO_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+_FRD_TO_FLU = np.diag([1.0, -1.0, -1.0])
+
+
+@dataclass(frozen=True)
+class BridgeTiming:
+    """Rates (simulated time) and waits (wall time) of the lockstep loop."""
+
+    sensor_period_s: float = 0.004  # HIL_SENSOR at 250 Hz, PX4's IMU_INTEG_RATE in SITL
+    mag_every: int = 2  # 125 Hz
+    baro_every: int = 5  # 50 Hz
+    gps_every: int = 25  # 10 Hz
+    truth_every: int = 5  # HIL_STATE_QUATERNION at 50 Hz
+    camera_fps: float = 30.0
+    speed: float | None = 1.0  # simulated s per wall s; None: as fast as PX4 and the physics go
+    boot_answer_wait_s: float = 0.005  # before PX4's first answer
+    answer_timeout_s: float = 2.0  # in lockstep: no answer this long (wall) = PX4 stalled
+    px4_silent_timeout_s: float = 3.0  # nothing at all from PX4 this long = PX4 gone
+
+    def __post_init__(self) -> None:
+        if not 0.001 <= self.sensor_period_s <= 0.02:
+            raise ValueError(f"sensor_period_s must be in [0.001, 0.02], got {self.sensor_period_s}")
+        if self.speed is not None and not (math.isfinite(self.speed) and 0.05 <= self.speed <= 100.0):
+            raise ValueError(f"speed must be in [0.05, 100] or None (as fast as possible), got {self.speed}")
+        if not 1.0 <= self.camera_fps <= 120.0:
+            raise ValueError(f"camera_fps must be in [1, 120], got {self.camera_fps}")
+        if min(self.mag_every, self.baro_every, self.gps_every, self.truth_every) < 1:
+            raise ValueError("sensor rate dividers must be >= 1")
+
+
+@dataclass
+class BridgeStats:
+    """What the loop measured; `Px4Bridge.stats()` returns a copy."""
+
+    ticks: int = 0
+    sim_s: float = 0.0
+    wall_s: float = 0.0
+    answers: int = 0  # HIL_ACTUATOR_CONTROLS received
+    late_answers: int = 0  # ticks that went on without PX4's answer after lockstep began
+    camera_frames: int = 0
+    armed: bool = False
+    lockstep: bool = False
+    first_answer_sim_s: float | None = None
+    messages_from_px4: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.sim_s / self.wall_s if self.wall_s > 0 else 0.0
+
+
+class CameraClock:
+    """What the bridge needs of a camera: take the pose for a frame (the video feed's `capture`)."""
+
+    def __init__(self, capture: Callable[[], None], fps: float) -> None:
+        self._capture, self._period = capture, 1.0 / fps
+        self._next_s = 0.0
+        self.frames = 0
+
+    def tick(self, sim_s: float) -> None:
+        if sim_s + 1e-9 >= self._next_s:
+            self._capture()
+            self.frames += 1
+            self._next_s = max(self._next_s + self._period, sim_s)
+
+
+class Px4Bridge:
+    """The world behind PX4's simulator link. `run()` blocks until `stop` is set or PX4 goes away."""
+
+    def __init__(
+        self,
+        world: World,
+        server: SimulatorServer,
+        sensors: SensorSuite,
+        home: HomePoint,
+        timing: BridgeTiming | None = None,
+        camera: CameraClock | None = None,
+        origin_enu_m: np.ndarray | None = None,
+    ) -> None:
+        self.world, self.server, self.sensors, self.home = world, server, sensors, home
+        self.timing = timing or BridgeTiming()
+        self.camera = camera
+        self.origin_enu_m = world.state().position_enu_m.copy() if origin_enu_m is None else origin_enu_m
+        self.mapping = RotorMapping(max_rad_s=world.drone.params.max_rotor_speed_rad_s)
+        self._encoder = HilEncoder()
+        self._substeps = max(1, round(self.timing.sensor_period_s / world.dt_s))
+        if abs(self._substeps * world.dt_s - self.timing.sensor_period_s) > 1e-9:
+            raise ValueError(
+                f"physics step {world.dt_s * 1000:.3f} ms does not divide the sensor period "
+                f"{self.timing.sensor_period_s * 1000:.1f} ms (use physics_hz = k × 250)"
+            )
+        self._time_usec = 0
+        self._command: ActuatorCommand | None = None
+        self._last_heard = time.monotonic()
+        self._velocity_ned = self._truth_velocity()
+        self.last_truth: Truth | None = None
+        self._stats = BridgeStats()
+        self._stats_lock = threading.Lock()
+        world.drone.stop_rotors()
+
+    # ------------------------------------------------------------------ queries
+    def stats(self) -> BridgeStats:
+        with self._stats_lock:
+            copy = BridgeStats(
+                **{**vars(self._stats), "messages_from_px4": dict(self._stats.messages_from_px4)}
+            )
+        return copy
+
+    @property
+    def time_usec(self) -> int:
+        """PX4's clock: the time of the last HIL_SENSOR sent."""
+        return self._time_usec
+
+    # --------------------------------------------------------------------- loop
+    def run(self, stop: threading.Event, max_sim_s: float | None = None) -> BridgeStats:
+        """Lockstep until `stop`, `max_sim_s` of simulated time, or PX4 disconnects (re-raised)."""
+        timing = self.timing
+        wall0 = time.monotonic()
+        sim0 = self.world.time_s
+        self._last_heard = wall0
+        while not stop.is_set():
+            if max_sim_s is not None and self.world.time_s - sim0 >= max_sim_s:
+                break
+            self.step()
+            if timing.speed is not None:
+                ahead_s = (self.world.time_s - sim0) / timing.speed - (time.monotonic() - wall0)
+                if ahead_s > 0.001:
+                    time.sleep(ahead_s)
+            with self._stats_lock:
+                self._stats.wall_s = time.monotonic() - wall0
+        return self.stats()
+
+    def step(self) -> None:
+        """One sensor period: sensors out, PX4's answer in, physics one tick."""
+        timing, world = self.timing, self.world
+        tick = self._stats.ticks
+        truth = self.last_truth = self._truth()
+        self._time_usec = round(world.time_s * 1e6) + PX4_CLOCK_OFFSET_US
+        imu = self.sensors.imu(truth)
+        mag = self.sensors.mag(truth) if tick % timing.mag_every == 0 else None
+        baro = self.sensors.baro(truth) if tick % timing.baro_every == 0 else None
+        out = [self._encoder.hil_sensor(self._time_usec, imu, mag, baro)]
+        if tick % timing.gps_every == 0:
+            out.append(self._encoder.hil_gps(self._time_usec, self.sensors.gps(truth)))
+        if tick % timing.truth_every == 0:
+            north, east, down = truth.position_ned_m.tolist()
+            out.append(
+                self._encoder.hil_state_quaternion(
+                    self._time_usec, truth, self.home.to_global(north, east, down)
+                )
+            )
+        self.server.send(b"".join(out))
+        self._await_answer(self._time_usec)
+        rotors = self.mapping.rotor_speeds(self._command)
+        world.step_rotors(rotors, self._substeps)
+        if self.camera is not None:
+            self.camera.tick(world.time_s)
+        with self._stats_lock:
+            st = self._stats
+            st.ticks += 1
+            st.sim_s = world.time_s
+            st.armed = bool(self._command and self._command.armed)
+            st.camera_frames = self.camera.frames if self.camera else 0
+
+    def _await_answer(self, time_usec: int) -> None:
+        """Read PX4's messages until the actuator answer for `time_usec` (or give up, see the module doc).
+
+        Once PX4 has answered anything, the wait is the long lockstep one (an answer for an earlier
+        tick arriving late switches it on at once).
+        """
+        timing = self.timing
+        start = time.monotonic()
+        while True:
+            wait_s = timing.answer_timeout_s if self._stats.lockstep else timing.boot_answer_wait_s
+            left = start + wait_s - time.monotonic()
+            for msg in self.server.receive(max(0.0, left)):
+                self._last_heard = time.monotonic()
+                name = msg.get_type()
+                counts = self._stats.messages_from_px4
+                counts[name] = counts.get(name, 0) + 1
+                if msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS:
+                    command = ActuatorCommand.from_message(msg)
+                    self._command = command
+                    self._stats.answers += 1
+                    if not self._stats.lockstep:
+                        self._stats.lockstep = True
+                        self._stats.first_answer_sim_s = self.world.time_s
+                        log.info("PX4 answers: lockstep from %.3f s of simulated time", self.world.time_s)
+                    if command.time_usec >= time_usec:
+                        return
+            if time.monotonic() - self._last_heard > timing.px4_silent_timeout_s:
+                raise Px4DisconnectedError(
+                    f"PX4 sent nothing for {timing.px4_silent_timeout_s:.1f} s on the simulator link"
+                )
+            if time.monotonic() - start >= wait_s:
+                if self._stats.lockstep:
+                    self._stats.late_answers += 1
+                    log.warning("no PX4 answer for t=%d us within %.1f s: stepping on", time_usec, wait_s)
+                return
+
+    # -------------------------------------------------------------------- truth
+    def _truth_velocity(self) -> np.ndarray:
+        return enu_to_ned(self.world.state().velocity_enu_m_s)
+
+    def _truth(self) -> Truth:
+        world = self.world
+        state = world.state()
+        velocity = enu_to_ned(state.velocity_enu_m_s)
+        acceleration = (velocity - self._velocity_ned) / self.timing.sensor_period_s
+        self._velocity_ned = velocity
+        r_enu_flu = np.array(p.getMatrixFromQuaternion(state.quaternion_xyzw.tolist())).reshape(3, 3)
+        rates = state.angular_velocity_flu_rad_s
+        return Truth(
+            time_s=world.time_s,
+            position_ned_m=enu_to_ned(state.position_enu_m - self.origin_enu_m),
+            velocity_ned_m_s=velocity,
+            acceleration_ned_m_s2=acceleration,
+            rotation_ned_frd=_ENU_TO_NED @ r_enu_flu @ _FRD_TO_FLU,
+            rates_frd_rad_s=np.array([rates[0], -rates[1], -rates[2]]),
+        )

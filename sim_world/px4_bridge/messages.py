@@ -1,0 +1,182 @@
+"""PX4's simulator MAVLink API, message by message, as PX4 v1.15 reads it (`SimulatorMavlink.cpp`).
+
+- HIL_SENSOR: `time_usec` sets PX4's clock (lockstep); `fields_updated` says which
+  groups are new: bits 0-2 accelerometer, 3-5 gyro, 6-8 magnetometer, 9 absolute
+  pressure, 10 differential pressure, 11 pressure altitude, 12 temperature (PX4 takes
+  a barometer sample only with 9, 11 and 12 together); `id` 0 is the primary IMU,
+  the one PX4 steps its clock on.
+- HIL_GPS: degE7, mm, cm, cm/s, cdeg; `cog` 65535 when unknown; `yaw` 0 = no heading.
+- HIL_STATE_QUATERNION: truth, which PX4 only logs as ground truth.
+- HIL_ACTUATOR_CONTROLS from PX4: `controls[0..3]` are the four motors in [0, 1]
+  (PWM_MAIN_FUNC1..4 = motors 1..4 of the quad X), all zero while disarmed; `mode`
+  carries MAV_MODE_FLAG_SAFETY_ARMED (128); `flags` bit 0 = lockstep.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
+
+from sim_world.px4_bridge.sensors import BaroReading, GpsReading, ImuReading, Truth
+
+ACCEL_BITS = 0b111
+GYRO_BITS = 0b111 << 3
+MAG_BITS = 0b111 << 6
+BARO_BITS = (1 << 9) | (1 << 11) | (1 << 12)
+ARMED_FLAG = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+LOCKSTEP_FLAG = 1
+
+
+@dataclass(frozen=True)
+class ActuatorCommand:
+    """One HIL_ACTUATOR_CONTROLS: PX4's time, whether it is armed, the four motor outputs in [0, 1]."""
+
+    time_usec: int
+    armed: bool
+    motors: tuple[float, float, float, float]
+    lockstep: bool
+
+    @classmethod
+    def from_message(cls, msg: mavlink.MAVLink_hil_actuator_controls_message) -> ActuatorCommand:
+        motors = tuple(_unit(v) for v in msg.controls[:4])
+        return cls(
+            time_usec=int(msg.time_usec),
+            armed=bool(msg.mode & ARMED_FLAG),
+            motors=motors,  # type: ignore[arg-type]
+            lockstep=bool(msg.flags & LOCKSTEP_FLAG),
+        )
+
+
+def _unit(value: float) -> float:
+    """A motor output clamped to [0, 1]; NaN (an output PX4 leaves unset) counts as 0."""
+    return 0.0 if not math.isfinite(value) else min(max(value, 0.0), 1.0)
+
+
+@dataclass(frozen=True)
+class RotorMapping:
+    """Motor output u ∈ [0, 1] → rotor speed command, as Gazebo's iris: ω = idle + u·(max − idle) when armed.
+
+    A disarmed PX4 sends zeros and the flag says so: the rotors are commanded to stop.
+    """
+
+    max_rad_s: float
+    idle_rad_s: float = 100.0
+
+    def rotor_speeds(self, command: ActuatorCommand | None) -> list[float]:
+        if command is None or not command.armed:
+            return [0.0, 0.0, 0.0, 0.0]
+        span = self.max_rad_s - self.idle_rad_s
+        return [self.idle_rad_s + u * span for u in command.motors]
+
+
+def quaternion_wxyz(rotation: np.ndarray) -> list[float]:
+    """A rotation matrix as a unit quaternion (w, x, y, z), MAVLink's order."""
+    m = rotation
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0.0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
+    else:
+        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
+    if q[0] < 0.0:
+        q = [-v for v in q]
+    return [float(v) for v in q]
+
+
+class HilEncoder:
+    """Builds the simulator's messages with one MAVLink 2 sequence counter."""
+
+    def __init__(self, system_id: int = 1, component_id: int = 51) -> None:
+        self._mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        self._mav.robust_parsing = True
+
+    def pack(self, msg: mavlink.MAVLink_message) -> bytes:
+        return msg.pack(self._mav)
+
+    def heartbeat(self) -> bytes:
+        return self.pack(
+            mavlink.MAVLink_heartbeat_message(
+                mavlink.MAV_TYPE_GENERIC, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE, 3
+            )
+        )
+
+    def hil_sensor(
+        self, time_usec: int, imu: ImuReading, mag: np.ndarray | None, baro: BaroReading | None
+    ) -> bytes:
+        fields = ACCEL_BITS | GYRO_BITS
+        mx = my = mz = 0.0
+        pressure = altitude = temperature = 0.0
+        if mag is not None:
+            fields |= MAG_BITS
+            mx, my, mz = (float(v) for v in mag)
+        if baro is not None:
+            fields |= BARO_BITS
+            pressure, altitude, temperature = baro.pressure_hpa, baro.pressure_altitude_m, baro.temperature_c
+        ax, ay, az = (float(v) for v in imu.accel_frd_m_s2)
+        gx, gy, gz = (float(v) for v in imu.gyro_frd_rad_s)
+        return self.pack(
+            mavlink.MAVLink_hil_sensor_message(
+                time_usec, ax, ay, az, gx, gy, gz, mx, my, mz, pressure, 0.0, altitude, temperature, fields, 0
+            )
+        )
+
+    def hil_gps(self, time_usec: int, gps: GpsReading) -> bytes:
+        vn, ve, vd = (float(v) for v in gps.velocity_ned_m_s)
+        ground_speed = math.hypot(vn, ve)
+        cog = 65535 if ground_speed < 0.05 else round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100) % 36000
+        return self.pack(
+            mavlink.MAVLink_hil_gps_message(
+                time_usec,
+                3,  # 3D fix
+                round(gps.latitude_deg * 1e7),
+                round(gps.longitude_deg * 1e7),
+                round(gps.altitude_amsl_m * 1000.0),
+                round(gps.eph_m * 100.0),
+                round(gps.epv_m * 100.0),
+                round(ground_speed * 100.0),
+                round(vn * 100.0),
+                round(ve * 100.0),
+                round(vd * 100.0),
+                cog,
+                gps.satellites,
+                0,
+                0,
+            )
+        )
+
+    def hil_state_quaternion(
+        self, time_usec: int, truth: Truth, global_position: tuple[float, float, float]
+    ) -> bytes:
+        lat, lon, alt = global_position
+        vn, ve, vd = (float(v) for v in truth.velocity_ned_m_s)
+        body_accel = truth.rotation_ned_frd.T @ (truth.acceleration_ned_m_s2 - np.array([0.0, 0.0, 9.80665]))
+        p, q, r = (float(v) for v in truth.rates_frd_rad_s)
+        speed_cm_s = round(math.sqrt(vn * vn + ve * ve + vd * vd) * 100.0)
+        return self.pack(
+            mavlink.MAVLink_hil_state_quaternion_message(
+                time_usec,
+                quaternion_wxyz(truth.rotation_ned_frd),
+                p,
+                q,
+                r,
+                round(lat * 1e7),
+                round(lon * 1e7),
+                round(alt * 1000.0),
+                round(vn * 100.0),
+                round(ve * 100.0),
+                round(vd * 100.0),
+                speed_cm_s,
+                speed_cm_s,
+                *(max(-32768, min(32767, round(a / 9.80665 * 1000.0))) for a in body_accel),
+            )
+        )

@@ -1,0 +1,311 @@
+"""Starting PX4 SITL from a build folder, the way PX4's own `make px4_sitl` does, and stopping it.
+
+A PX4 SITL build folder (`build/px4_sitl_default` of a PX4 checkout, or a copy of it)
+holds `bin/px4` and `etc/` (the ROMFS: `init.d-posix/rcS`, airframes). PX4 runs its
+startup script with `/bin/sh`, and the script calls modules as `px4-<module>`
+commands, which are links to `bin/px4` that PX4's build makes. A folder copied
+without its links (an archive, a read-only share) has 3-byte files there instead, so
+each run makes its own links in a private folder first on PATH.
+
+Per run, PX4 gets:
+- its own working folder (parameters, dataman, logs), so runs never share state;
+- instance N: PX4's ports 4560+N (simulator), 14580+N → 14540+N (offboard API),
+  lock file /tmp/px4_lock-N;
+- `px4-rc.params` from a private folder on PATH, the hook PX4's rcS sources after the
+  airframe ("user defined params for instances can be in PATH"): the per-run system id
+  (so a client can tell this PX4 from any other) and the run's parameter overrides;
+- a parent-death signal: PX4 gets SIGTERM when the process that started it dies, however
+  it dies (SIGKILL included), so no PX4 outlives its simulator.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import errno
+import fcntl
+import logging
+import os
+import shutil
+import signal
+import subprocess
+import tempfile
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+log = logging.getLogger(__name__)
+
+PX4_DIR_ENV = "PX4_SITL_DIR"
+AIRFRAME_ID = 10016  # none_iris: a quad X waiting for an external simulator
+AIRFRAME_MODEL = "none_iris"
+MAX_INSTANCE = 9  # PX4 gives instances above 9 the same offboard port (14549)
+_PR_SET_PDEATHSIG = 1
+
+
+class Px4FolderError(ValueError):
+    """The PX4 SITL folder is missing or is not a PX4 SITL build; the message says what is wrong."""
+
+
+class Px4StartError(RuntimeError):
+    """PX4 exited while starting; the message carries the end of its console output."""
+
+
+def find_px4_dir(explicit: str | Path | None, fallbacks: tuple[Path, ...] = ()) -> Path:
+    """The PX4 SITL folder: `explicit`, else $PX4_SITL_DIR, else the first fallback that exists.
+
+    Raises `Px4FolderError` naming where it looked when none is a PX4 SITL build.
+    """
+    candidates: list[tuple[str, Path]] = []
+    if explicit is not None:
+        candidates.append(("--px4", Path(explicit)))
+    elif os.environ.get(PX4_DIR_ENV):
+        candidates.append((f"${PX4_DIR_ENV}", Path(os.environ[PX4_DIR_ENV])))
+    else:
+        candidates += [("default", path) for path in fallbacks]
+    if not candidates:
+        raise Px4FolderError(
+            f"no PX4 SITL folder given: pass --px4 DIR or set {PX4_DIR_ENV} to a PX4 SITL build folder "
+            "(PX4-Autopilot/build/px4_sitl_default after `make px4_sitl_default`)"
+        )
+    problems = []
+    for source, path in candidates:
+        try:
+            return check_px4_dir(path)
+        except Px4FolderError as exc:
+            problems.append(f"{source}: {exc}")
+    raise Px4FolderError("; ".join(problems))
+
+
+def check_px4_dir(path: Path) -> Path:
+    """`path` resolved if it is a PX4 SITL build folder with the external-simulator airframe."""
+    path = Path(path).expanduser()
+    if not path.is_dir():
+        raise Px4FolderError(f"{path} is not a folder")
+    binary = path / "bin" / "px4"
+    if not binary.is_file():
+        raise Px4FolderError(f"{path} has no bin/px4: not a PX4 SITL build folder (build/px4_sitl_default)")
+    if not os.access(binary, os.X_OK):
+        raise Px4FolderError(f"{binary} is not executable")
+    rcs = path / "etc" / "init.d-posix" / "rcS"
+    if not rcs.is_file():
+        raise Px4FolderError(f"{path} has no etc/init.d-posix/rcS: not a PX4 SITL build folder")
+    airframes = list((path / "etc" / "init.d-posix" / "airframes").glob(f"{AIRFRAME_ID}_*"))
+    if not airframes:
+        raise Px4FolderError(
+            f"{path} has no airframe {AIRFRAME_ID}_{AIRFRAME_MODEL} in etc/init.d-posix/airframes "
+            "(PX4 v1.13 or newer needed)"
+        )
+    return path.resolve()
+
+
+LINK_LOSS_TIMEOUTS_S = {
+    "COM_OF_LOSS_T": 1.0,
+    "COM_DL_LOSS_T": 10.0,
+    "COM_RC_LOSS_T": 0.5,
+    "COM_OBC_LOSS_T": 5.0,
+}
+"""PX4 v1.15's defaults of the timeouts that a client on the wall clock feeds: offboard setpoints
+(MAVSDK re-sends at 20 Hz of wall time), the data link's heartbeats (1 Hz), RC, onboard computer."""
+
+
+def speed_scaled_timeouts(speed_factor: float | None) -> dict[str, float]:
+    """PX4's link-loss timeouts for a simulation `speed_factor` × real time (what PX4's rcS does with
+    PX4_SIM_SPEED_FACTOR, without needing `bc`): a 20 Hz wall-clock setpoint stream is 20/speed Hz
+    of PX4's time. Nothing below real time."""
+    if speed_factor is None or speed_factor <= 1.0:
+        return {}
+    return {name: round(value * speed_factor, 3) for name, value in LINK_LOSS_TIMEOUTS_S.items()}
+
+
+def _set_parent_death_signal() -> None:
+    """In the child before exec: SIGTERM when the parent dies (Linux; a no-op elsewhere)."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
+
+
+@dataclass(frozen=True)
+class Px4Options:
+    """One PX4 SITL run."""
+
+    px4_dir: Path
+    instance: int = 0
+    system_id: int | None = None  # None: PX4's default for the instance (1 + N)
+    params: Mapping[str, float] = field(default_factory=dict)
+    speed_factor: float | None = None  # faster than real time: PX4's link-loss timeouts are stretched by it
+    keep_logs_in: Path | None = None  # copy PX4's .ulg logs here when it stops
+    console_log: Path | None = None  # PX4's console output (default: inside the working folder)
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.instance <= MAX_INSTANCE:
+            raise ValueError(f"PX4 instance must be 0..{MAX_INSTANCE}, got {self.instance}")
+        if self.system_id is not None and not 1 <= self.system_id <= 254:
+            raise ValueError(f"system_id must be 1..254, got {self.system_id}")
+        for name, value in self.params.items():
+            if not name.replace("_", "").isalnum() or not name.isupper() or len(name) > 16:
+                raise ValueError(f"PX4 parameter name {name!r} is not valid")
+            float(value)
+
+
+class Px4Process:
+    """PX4 SITL in external-simulator mode as a child process; `close()` stops it (idempotent)."""
+
+    def __init__(self, options: Px4Options) -> None:
+        self.options = options
+        self.workdir = Path(tempfile.mkdtemp(prefix=f"px4-sitl-{options.instance}-"))
+        self.console_log = options.console_log or self.workdir / "px4.log"
+        self._process: subprocess.Popen[bytes] | None = None
+        self._log_file = None
+
+    # -------------------------------------------------------------- lifecycle
+    def start(self) -> Px4Process:
+        opts = self.options
+        px4 = opts.px4_dir
+        links = self.workdir / "bin"
+        links.mkdir()
+        for entry in (px4 / "bin").iterdir():
+            name = entry.name
+            if name.startswith("px4-") and name != "px4-alias.sh":
+                (links / name).symlink_to(px4 / "bin" / "px4")
+        (links / "px4-alias.sh").symlink_to(px4 / "bin" / "px4-alias.sh")
+        (links / "px4-rc.params").write_text(self._params_script())
+        run_dir = self.workdir / "run"
+        run_dir.mkdir()
+        env = {k: v for k, v in os.environ.items() if not k.startswith(("PX4_", "ROS_"))}
+        env.update(
+            HEADLESS="1",
+            PX4_SIM_MODEL=AIRFRAME_MODEL,
+            PX4_SYS_AUTOSTART=str(AIRFRAME_ID),
+            PATH=f"{links}:{px4 / 'bin'}:{env.get('PATH', '/usr/bin:/bin')}",
+        )
+        self.console_log.parent.mkdir(parents=True, exist_ok=True)
+        self._log_file = self.console_log.open("wb")
+        command = [str(px4 / "bin" / "px4"), "-i", str(opts.instance), "-d", str(px4 / "etc")]
+        log.info("starting PX4 SITL instance %d: %s (in %s)", opts.instance, " ".join(command), run_dir)
+        self._process = subprocess.Popen(
+            command,
+            cwd=run_dir,
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=self._log_file,
+            stderr=subprocess.STDOUT,
+            preexec_fn=_set_parent_death_signal,
+        )
+        return self
+
+    def _params_script(self) -> str:
+        lines = ["#!/bin/sh", "# written by drone-inspect for this run: sourced by PX4's rcS"]
+        if self.options.system_id is not None:
+            lines.append(f"param set MAV_SYS_ID {self.options.system_id}")
+        params = dict(speed_scaled_timeouts(self.options.speed_factor))
+        params.update(self.options.params)
+        for name, value in params.items():
+            lines.append(f"param set {name} {float(value):g}")
+        return "\n".join(lines) + "\n"
+
+    @property
+    def pid(self) -> int | None:
+        return None if self._process is None else self._process.pid
+
+    @property
+    def alive(self) -> bool:
+        return self._process is not None and self._process.poll() is None
+
+    @property
+    def returncode(self) -> int | None:
+        return None if self._process is None else self._process.poll()
+
+    def output_tail(self, chars: int = 2000) -> str:
+        try:
+            return self.console_log.read_text(errors="replace")[-chars:]
+        except OSError:
+            return ""
+
+    def check_alive(self) -> None:
+        """Raise `Px4StartError` with PX4's last words if it has exited."""
+        if self._process is not None and self._process.poll() is not None:
+            raise Px4StartError(
+                f"PX4 SITL exited with {self._process.returncode}; its console ended with:\n"
+                f"{self.output_tail()}"
+            )
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        process, self._process = self._process, None
+        if process is not None and process.poll() is None:
+            process.send_signal(signal.SIGTERM)  # PX4 shuts down its modules and closes its log
+            try:
+                process.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                log.warning("PX4 did not stop within %.0f s of SIGTERM: killing it", timeout_s)
+                process.kill()
+                process.wait(timeout_s)
+        if self._log_file is not None:
+            self._log_file.close()
+            self._log_file = None
+        if self.options.keep_logs_in is not None:
+            self._keep_logs(self.options.keep_logs_in)
+        shutil.rmtree(self.workdir, ignore_errors=True)
+
+    def _keep_logs(self, folder: Path) -> None:
+        logs = sorted((self.workdir / "run" / "log").rglob("*.ulg"))
+        if not logs and self.options.console_log is not None:
+            return
+        folder.mkdir(parents=True, exist_ok=True)
+        for ulog in logs:
+            shutil.copy2(ulog, folder / ulog.name)
+        if self.options.console_log is None and self.console_log.exists():
+            shutil.copy2(self.console_log, folder / "px4.log")
+
+    def __enter__(self) -> Px4Process:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class Px4InstanceBusyError(RuntimeError):
+    """The PX4 instance asked for (or every instance, for `auto`) is held by another run."""
+
+
+@contextmanager
+def px4_instance(wanted: int | str) -> Iterator[int]:
+    """Hold a PX4 instance number for the block: a lock file per instance, released on any exit."""
+    folder = Path(tempfile.gettempdir())
+    candidates = range(MAX_INSTANCE + 1) if wanted == "auto" else [int(wanted)]
+    for n in candidates:
+        if wanted == "auto" and _px4_running(n):
+            continue
+        handle: IO[bytes] = (folder / f"drone-inspect-px4-{n}.lock").open("ab")
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            handle.close()
+            if exc.errno in (errno.EAGAIN, errno.EACCES):
+                continue
+            raise
+        try:
+            yield n
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+            handle.close()
+        return
+    which = "every PX4 instance (0..9)" if wanted == "auto" else f"PX4 instance {wanted}"
+    raise Px4InstanceBusyError(f"{which} is in use by another run on this machine")
+
+
+def _px4_running(instance: int) -> bool:
+    """Whether some PX4 (ours or not) holds PX4's own lock for this instance (/tmp/px4_lock-N)."""
+    path = Path(f"/tmp/px4_lock-{instance}")
+    if not path.exists():
+        return False
+    try:
+        with path.open("rb") as handle:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(handle, fcntl.LOCK_UN)
+    except OSError:
+        return True
+    return False

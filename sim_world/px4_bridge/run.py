@@ -1,0 +1,322 @@
+"""`run_px4_sim`: the world, its camera, the bridge and PX4 SITL together, until stopped.
+
+Order matters: the simulator port is bound first (a port in use fails before PX4 or
+anything else starts), then the render process, then PX4, which dials the port. The
+bridge waits for PX4's connection (watching that PX4 is still alive), runs until
+PX4 answers in lockstep, says it is ready, and then runs until `stop` is set or PX4
+goes away. Everything is closed in reverse order on every way out.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, TextIO
+
+from sim_world.camera import CameraConfig
+from sim_world.mavlink.video import VideoConfig, VideoError, WorldVideoFeed
+from sim_world.px4_bridge.bridge import BridgeStats, BridgeTiming, CameraClock, Px4Bridge
+from sim_world.px4_bridge.geodesy import HomePoint, magnetic_field_ned_gauss
+from sim_world.px4_bridge.link import (
+    SIMULATOR_BASE_PORT,
+    Px4DisconnectedError,
+    SimulatorLinkError,
+    SimulatorServer,
+)
+from sim_world.px4_bridge.px4_process import MAX_INSTANCE, Px4Options, Px4Process, Px4StartError
+from sim_world.px4_bridge.sensors import SensorNoise, SensorSuite
+from sim_world.quadrotor import QuadrotorParams
+from sim_world.scene_config import DEFAULT_SCENE, SceneConfig, parse_scene_config
+from sim_world.sim_vehicle_main import StartOffset
+from sim_world.wind import WindConfig
+from sim_world.world import World, WorldConfig, derived_seed
+
+log = logging.getLogger(__name__)
+
+PX4_QUAD = QuadrotorParams(landing_gear_stiffness_n_m=3000.0)
+"""The project's quadrotor with compliant landing legs (3 mm static deflection, damped)."""
+PHYSICS_HZ = 500.0  # two physics steps per 4 ms sensor tick
+OFFBOARD_PORT_BASE = 14540
+VIDEO_PORT_BASE = 8080
+MAGNETIC_MODEL_YEAR = 2025.5
+MAX_SPEED_FACTOR = 10.0
+"""For PX4's timeouts, `--speed max` counts as 10× real time (measured here: 2.7× with the 224 px
+camera, 8.9× without, on 2 cores)."""
+
+
+@dataclass(frozen=True)
+class Px4SimConfig:
+    """One `dronectl px4-sim` (or one `px4-sitl` mission's simulator)."""
+
+    px4_dir: Path
+    instance: int = 0
+    scene: SceneConfig = DEFAULT_SCENE
+    seed: int = 0
+    start_offset: StartOffset | None = None
+    image_size_px: int = 224
+    camera: bool = True
+    video_port: int | None = None  # None: 8080 + instance
+    video_host: str = "127.0.0.1"
+    timing: BridgeTiming = field(default_factory=BridgeTiming)
+    home: HomePoint = field(default_factory=HomePoint)
+    noise: SensorNoise = field(default_factory=SensorNoise)
+    system_id: int | None = None  # None: PX4's own (1 + instance)
+    params: dict[str, float] = field(default_factory=dict)
+    px4_log_dir: Path | None = None  # keep PX4's console output and .ulg logs here
+    connect_timeout_s: float = 60.0  # PX4 start to lockstep (a cold start here: ~1 s)
+    duration_s: float | None = None  # of simulated time; None: until stopped
+    wind: WindConfig = field(default_factory=WindConfig)
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.instance <= MAX_INSTANCE:
+            raise ValueError(f"PX4 instance must be 0..{MAX_INSTANCE}, got {self.instance}")
+        if not 32 <= self.image_size_px <= 1024:
+            raise ValueError(f"image_size_px must be in [32, 1024], got {self.image_size_px}")
+        if self.system_id is not None and not 1 <= self.system_id <= 254:
+            raise ValueError(f"system_id must be 1..254, got {self.system_id}")
+        if self.duration_s is not None and not self.duration_s > 0:
+            raise ValueError(f"duration_s must be > 0, got {self.duration_s}")
+
+    @property
+    def simulator_port(self) -> int:
+        return SIMULATOR_BASE_PORT + self.instance
+
+    @property
+    def mavlink_url(self) -> str:
+        """Where a MAVSDK client listens for this PX4 (PX4 sends to 127.0.0.1:14540+N)."""
+        return f"udpin://0.0.0.0:{OFFBOARD_PORT_BASE + self.instance}"
+
+    @property
+    def http_video_port(self) -> int:
+        return VIDEO_PORT_BASE + self.instance if self.video_port is None else self.video_port
+
+
+@dataclass(frozen=True)
+class Px4SimReady:
+    """What `on_ready` learns: the URLs, PX4's system id and the simulator's pid-free facts."""
+
+    mavlink_url: str
+    system_id: int
+    video_url: str | None
+    truth_url: str | None
+    px4_pid: int | None
+    lockstep_after_s: float
+
+
+def build_px4_world(config: Px4SimConfig) -> World:
+    """The world with the drone landed below the start pose (or at the default start)."""
+    camera = CameraConfig(width=config.image_size_px, height=config.image_size_px)
+    world = World(
+        WorldConfig(
+            scene=config.scene, camera=camera, drone=PX4_QUAD, physics_hz=PHYSICS_HZ, wind=config.wind
+        ),
+        seed=config.seed,
+    )
+    if config.start_offset is not None:
+        o = config.start_offset
+        position, yaw_enu = world.scene.pose_for_offset(o.right_m, o.up_m, o.distance_m, o.yaw_deg)
+        world.drone.set_pose((float(position[0]), float(position[1]), world.drone.resting_height_m), yaw_enu)
+    world.drone.stop_rotors()
+    return world
+
+
+def run_px4_sim(
+    config: Px4SimConfig,
+    stop: threading.Event | None = None,
+    on_ready: Callable[[Px4SimReady], None] | None = None,
+) -> BridgeStats:
+    """Serve the world to PX4 until `stop`, `duration_s`, or PX4's exit (`Px4StartError` / disconnect)."""
+    stop = stop or threading.Event()
+    world = build_px4_world(config)
+    with world:
+        origin = world.state().position_enu_m.copy()
+        field = magnetic_field_ned_gauss(
+            config.home.latitude_deg,
+            config.home.longitude_deg,
+            config.home.altitude_amsl_m,
+            MAGNETIC_MODEL_YEAR,
+        )
+        sensors = SensorSuite(config.home, field, config.noise, seed=derived_seed(config.seed, 7))
+        with SimulatorServer("127.0.0.1", config.simulator_port) as server:
+            video = None
+            if config.camera:
+                video = WorldVideoFeed(
+                    world,
+                    origin,
+                    VideoConfig(
+                        config.video_host, config.http_video_port, fps=config.timing.camera_fps, clock="sim"
+                    ),
+                )
+                video.start()
+            try:
+                options = Px4Options(
+                    px4_dir=config.px4_dir,
+                    instance=config.instance,
+                    system_id=config.system_id,
+                    params=config.params,
+                    keep_logs_in=config.px4_log_dir,
+                    speed_factor=MAX_SPEED_FACTOR if config.timing.speed is None else config.timing.speed,
+                    console_log=None if config.px4_log_dir is None else config.px4_log_dir / "px4.log",
+                )
+                with Px4Process(options) as px4:
+                    _accept(server, px4, config.connect_timeout_s)
+                    camera = None if video is None else CameraClock(video.capture, config.timing.camera_fps)
+                    bridge = Px4Bridge(world, server, sensors, config.home, config.timing, camera, origin)
+                    started = time.monotonic()
+                    while not bridge.stats().lockstep:
+                        if stop.is_set():
+                            return bridge.stats()
+                        px4.check_alive()
+                        if time.monotonic() - started > config.connect_timeout_s:
+                            raise Px4StartError(
+                                "PX4 connected but never answered in lockstep within "
+                                f"{config.connect_timeout_s:.0f} s:\n"
+                                f"{px4.output_tail()}"
+                            )
+                        bridge.step()
+                    if on_ready is not None:
+                        on_ready(
+                            Px4SimReady(
+                                mavlink_url=config.mavlink_url,
+                                system_id=config.system_id or config.instance + 1,
+                                video_url=None if video is None else video.stream_url,
+                                truth_url=None if video is None else video.truth_url,
+                                px4_pid=px4.pid,
+                                lockstep_after_s=world.time_s,
+                            )
+                        )
+                    remaining = (
+                        None if config.duration_s is None else max(0.0, config.duration_s - world.time_s)
+                    )
+                    return bridge.run(stop, max_sim_s=remaining)
+            finally:
+                if video is not None:
+                    video.close()
+
+
+def _accept(server: SimulatorServer, px4: Px4Process, timeout_s: float) -> None:
+    """Wait for PX4 to dial in, failing at once (with its console) if it exits instead."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        px4.check_alive()
+        try:
+            server.accept(min(0.5, max(0.0, deadline - time.monotonic())))
+            return
+        except SimulatorLinkError:
+            if time.monotonic() >= deadline:
+                raise SimulatorLinkError(
+                    f"PX4 did not connect to TCP port {server.address[1]} within {timeout_s:.0f} s; "
+                    f"its console ended with:\n{px4.output_tail()}"
+                ) from None
+
+
+# ----------------------------------------------------------------------------- serving a process
+READY_PREFIX = "px4-sim ready: "
+
+
+def config_to_json(config: Px4SimConfig) -> dict[str, Any]:
+    """The config as JSON, for the simulator's process entry point (`python -m sim_world.px4_bridge`)."""
+    return {
+        "px4_dir": str(config.px4_dir),
+        "instance": config.instance,
+        "scene": config.scene.model_dump(mode="json"),
+        "seed": config.seed,
+        "start_offset": None if config.start_offset is None else asdict(config.start_offset),
+        "image_size_px": config.image_size_px,
+        "camera": config.camera,
+        "video_port": config.video_port,
+        "video_host": config.video_host,
+        "timing": asdict(config.timing),
+        "home": asdict(config.home),
+        "noise": asdict(config.noise),
+        "system_id": config.system_id,
+        "params": dict(config.params),
+        "px4_log_dir": None if config.px4_log_dir is None else str(config.px4_log_dir),
+        "connect_timeout_s": config.connect_timeout_s,
+        "duration_s": config.duration_s,
+        "wind": asdict(config.wind),
+    }
+
+
+def config_from_json(data: dict[str, Any]) -> Px4SimConfig:
+    """The inverse of `config_to_json` (values are validated by the dataclasses and the scene model)."""
+    return Px4SimConfig(
+        px4_dir=Path(data["px4_dir"]),
+        instance=int(data["instance"]),
+        scene=parse_scene_config(data["scene"], "<px4-sim config>"),
+        seed=int(data["seed"]),
+        start_offset=None if data["start_offset"] is None else StartOffset(**data["start_offset"]),
+        image_size_px=int(data["image_size_px"]),
+        camera=bool(data["camera"]),
+        video_port=data["video_port"],
+        video_host=data["video_host"],
+        timing=BridgeTiming(**data["timing"]),
+        home=HomePoint(**data["home"]),
+        noise=SensorNoise(**data["noise"]),
+        system_id=data["system_id"],
+        params={str(k): float(v) for k, v in data["params"].items()},
+        px4_log_dir=None if data["px4_log_dir"] is None else Path(data["px4_log_dir"]),
+        connect_timeout_s=float(data["connect_timeout_s"]),
+        duration_s=data["duration_s"],
+        wind=WindConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in data["wind"].items()}),
+    )
+
+
+def serve(config: Px4SimConfig, out: TextIO, watch_parent: bool = False) -> int:
+    """Run until SIGINT, SIGTERM, SIGHUP (or the parent's death, with `watch_parent`); an exit code.
+
+    Prints one line `px4-sim ready: {json}` to `out` once PX4 answers in lockstep (URLs,
+    PX4's system id), and a summary at the end. 0: stopped as asked; 1: PX4 or the
+    simulator failed (the reason is logged).
+    """
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: object) -> None:
+        log.info("px4-sim: %s received, stopping", signal.Signals(signum).name)
+        stop.set()
+
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, on_signal)
+    if watch_parent:
+        _watch_parent(stop)
+
+    def ready(info: Px4SimReady) -> None:
+        out.write(READY_PREFIX + json.dumps(asdict(info)) + "\n")
+        out.flush()
+
+    try:
+        stats = run_px4_sim(config, stop, on_ready=ready)
+    except (Px4StartError, Px4DisconnectedError, SimulatorLinkError, VideoError, OSError) as exc:
+        log.error("px4-sim: %s", exc)
+        out.write(f"px4-sim failed: {exc}\n")
+        out.flush()
+        return 1
+    out.write(
+        f"px4-sim: {stats.sim_s:.1f} s simulated in {stats.wall_s:.1f} s (x{stats.real_time_factor:.2f}), "
+        f"{stats.answers} PX4 answers, {stats.late_answers} late, {stats.camera_frames} camera frames\n"
+    )
+    out.flush()
+    return 0
+
+
+def _watch_parent(stop: threading.Event, poll_s: float = 0.5, grace_s: float = 10.0) -> None:
+    """Stop when the process that started us is gone (re-parented), then exit hard if stopping hangs."""
+    parent = os.getppid()
+
+    def watch() -> None:
+        while not stop.is_set():
+            if os.getppid() != parent:
+                log.warning("px4-sim: parent process %d is gone: stopping", parent)
+                stop.set()
+                time.sleep(grace_s)
+                os._exit(3)
+            time.sleep(poll_s)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
