@@ -33,6 +33,7 @@ from tqdm import tqdm
 from controller.flight_kit import LoadedModels
 from controller.mission_schema import PX4_SITL, SIM, SIM_MAVLINK, Mission, PortSpec, parse_mission
 from controller.missions import MissionResult
+from controller.report import claim_report_dir
 from controller.suite import UDP_PORTS_PER_MISSION, failed_to_start
 
 log = logging.getLogger(__name__)
@@ -159,7 +160,7 @@ def run_benchmark(
 ) -> dict[str, Any]:
     """Fly every planner on the same missions; returns the summary and every mission's row (JSON-able)."""
     with tempfile.TemporaryDirectory(prefix="bench-missions-") as tmp:
-        out = Path(report_dir or tmp)
+        out = claim_report_dir(report_dir) if report_dir is not None else Path(tmp)
         runs = [(m, out / m.name) for p in config.planners for m in benchmark_missions(config, p, skip_seeds)]
         results: list[MissionResult] = []
         started = time.perf_counter()

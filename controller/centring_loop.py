@@ -426,13 +426,17 @@ class CentringLoop:
             stop_threshold_px=threshold,
         )  # fmt: skip
 
+    def stop_threshold_px(self, width: int) -> float:
+        """ε minus the stopping margin for images `width` px wide; ValueError when that leaves nothing."""
+        return self._stop_threshold_px(width)
+
     def _stop_threshold_px(self, width: int) -> float:
         cfg = self.config
         margin = cfg.stop_margin_px if cfg.stop_margin_px is not None else default_stop_margin_px(width)
         if not 0 <= margin < cfg.epsilon_px:
             raise ValueError(
-                f"the stopping margin {margin:g} px must be in [0, ε={cfg.epsilon_px:g} px) "
-                f"for {width} px wide images"
+                f"ε = {cfg.epsilon_px:g} px leaves nothing inside the stopping margin of {margin:g} px "
+                f"(for {width} px wide images): give a larger epsilon_px or a smaller stop_margin_px"
             )
         return cfg.epsilon_px - margin
 

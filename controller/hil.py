@@ -1,9 +1,11 @@
 """The MAVLink kits of a mission: the simulated drone over MAVLink (`sim-mavlink`) and a real vehicle.
 
-`sim-mavlink` is the hardware-in-the-loop path: `dronectl sim-vehicle` runs as a
-subprocess with the mission's scene, seed and start offset (landed below the
-start pose); the controller connects with MAVSDK and reads the MJPEG stream with
-OpenCV, exactly as it would a real drone. Ports (one slot per mission, from
+`sim-mavlink` is the hardware-in-the-loop path: the sim-vehicle runs as a child
+process (`python -m sim_world.mavlink`, through `flight.sim_launcher`: its own
+session, gone with us) with the mission's scene, seed, wind and start offset (landed
+below the start pose) and a random MAVLink system id that MAVSDK insists on; the
+controller connects with MAVSDK and reads the MJPEG stream with OpenCV, exactly as
+it would a real drone. Ports (one slot per mission, from
 `mission.ports`): the sim binds UDP `p`, sends to `p+1`, where the .tlog relay
 listens and forwards to MAVSDK on `p+2`; video on HTTP `ports.http`. The sim's
 `/truth.json` is read for judging (and the oracle) only.
@@ -18,30 +20,29 @@ from __future__ import annotations
 import json
 import logging
 import re
-import signal
-import subprocess
-import sys
-import time
-import urllib.error
+import secrets
 import urllib.request
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from controller.flight_kit import FlightKit, LoadedModels, models_detector, models_planner
 from controller.mission_schema import Mission, StartOffset
-from controller.missions import scene_config_for, start_offset_for
+from controller.missions import scene_config_for, start_offset_for, wind_config_for
 from controller.planners import make_planner
 from controller.tlog_proxy import MavlinkTlogProxy
 from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+from flight.sim_launcher import SimulatorProcess
 from perception.centring import default_epsilon_px
 from perception.detector import Detector
 from perception.stream_camera import StreamCamera
+from sim_world.mavlink.config import SimVehicleConfig
 from sim_world.scene_config import SceneConfig
 from sim_world.scene_sampling import sample_scene
+from sim_world.sim_vehicle_main import READY_PREFIX as SIM_READY_PREFIX
+from sim_world.sim_vehicle_main import SimVehicleRun, run_to_json
+from sim_world.sim_vehicle_main import StartOffset as SimStartOffset
 
 log = logging.getLogger(__name__)
 
@@ -52,10 +53,6 @@ PX4_MIN_TAKEOFF_ALT_M = 0.5
 """PX4 refuses MIS_TAKEOFF_ALT below 0.5 m: a lower start pose is flown from 0.5 m (a few px off the draw)."""
 TLOG_NAME = "flight.tlog"
 REAL_CLIENT_PORT_SHIFT = 1000
-
-
-class SimVehicleLaunchError(RuntimeError):
-    """`dronectl sim-vehicle` did not come up; the message carries the end of its log."""
 
 
 def _detector(mission: Mission, models: LoadedModels | None) -> Detector:
@@ -95,56 +92,30 @@ class SimTruth:
         return float(_get_json(self.url)["truth"]["drone"]["position_enu_m"][2])
 
 
-def sim_vehicle_command(mission: Mission, start: StartOffset, scene_file: Path | None) -> list[str]:
-    """The `dronectl sim-vehicle` command line for a mission (real time, PX4 boot rules)."""
+def sim_vehicle_run(mission: Mission, start: StartOffset, system_id: int) -> SimVehicleRun:
+    """The sim-vehicle for a mission: real time, PX4's boot rules, landed below the start pose."""
     p = mission.ports.mavlink_udp
-    command = [
-        sys.executable, "-m", "tools.dronectl", "sim-vehicle",
-        "--local-port", str(p), "--remote-port", str(p + 1), "--video-port", str(mission.ports.http),
-        "--seed", str(mission.scene.seed), "--size", str(SIM_IMAGE_PX), "--status-every", "0",
-        # `=`: the value may start with a minus sign, which argparse would take for an option
-        f"--start-offset={start.right_m:.4f},{start.up_m:.4f},{start.distance_m:.4f},{start.yaw_deg:.4f}",
-    ]  # fmt: skip
-    if scene_file is not None:
-        command += ["--scene", str(scene_file)]
-    return command
+    vehicle = SimVehicleConfig(
+        local_port=p,
+        remote_port=p + 1,
+        sysid=system_id,
+        video_port=mission.ports.http,
+        video_fps=15.0,
+    )
+    offset = SimStartOffset(start.right_m, start.up_m, start.distance_m, start.yaw_deg)
+    return SimVehicleRun(
+        vehicle=vehicle,
+        scene=scene_config_for(mission),
+        seed=mission.scene.seed,
+        start_offset=offset,
+        image_size_px=SIM_IMAGE_PX,
+        wind=wind_config_for(mission),
+    )
 
 
-@contextmanager
-def sim_vehicle_process(command: list[str], log_path: Path, truth_url: str) -> Iterator[subprocess.Popen]:
-    """Run `dronectl sim-vehicle` until the block ends; ready once its truth endpoint has a first frame."""
-    log_path.parent.mkdir(parents=True, exist_ok=True)
-    with log_path.open("wb") as log_file:
-        # Its own session: a Ctrl-C in the terminal reaches only the controller, which lands first.
-        process = subprocess.Popen(command, stdout=log_file, stderr=subprocess.STDOUT, start_new_session=True)
-        try:
-            deadline = time.monotonic() + READY_TIMEOUT_S
-            while True:
-                if process.poll() is not None:
-                    tail = log_path.read_text(errors="replace")[-1500:]
-                    raise SimVehicleLaunchError(f"sim-vehicle exited with {process.returncode}:\n{tail}")
-                try:
-                    if "drone" in _get_json(truth_url, timeout_s=0.5).get(
-                        "truth", {}
-                    ):  # a first frame is out
-                        break
-                except (OSError, ValueError):
-                    pass
-                if time.monotonic() > deadline:
-                    detail = f"not serving {truth_url} within {READY_TIMEOUT_S:.0f} s; see {log_path}"
-                    raise SimVehicleLaunchError(f"sim-vehicle {detail}")
-                time.sleep(0.2)
-            yield process
-        finally:
-            if process.poll() is None:
-                process.send_signal(
-                    signal.SIGINT
-                )  # what Ctrl-C sends: sim-vehicle closes its ports and exits
-                try:
-                    process.wait(timeout=10.0)
-                except subprocess.TimeoutExpired:
-                    process.kill()
-                    process.wait(timeout=5.0)
+def new_system_id() -> int:
+    """A random MAVLink system id for a vehicle a run launches: MAVSDK then refuses any other vehicle."""
+    return 10 + secrets.randbelow(240)
 
 
 @contextmanager
@@ -152,32 +123,33 @@ def open_sim_mavlink_kit(
     mission: Mission, out_dir: Path, models: LoadedModels | None = None
 ) -> Iterator[FlightKit]:
     """sim-vehicle subprocess + tlog relay + MAVSDK + MJPEG stream camera + detector + planner."""
-    vfov = SIM_HFOV_DEG  # square image
-    start = start_offset_for(mission, SIM_HFOV_DEG, vfov)
-    scene = scene_config_for(mission)
+    start = start_offset_for(mission, SIM_HFOV_DEG, SIM_HFOV_DEG)  # square image
     out_dir.mkdir(parents=True, exist_ok=True)
-    scene_file = None
-    if mission.scene.config is not None or mission.target_kind is not None:
-        scene_file = out_dir / "scene.yaml"
-        scene_file.write_text(yaml.safe_dump(scene.model_dump(mode="json"), sort_keys=False))
+    system_id = new_system_id()
     p, http = mission.ports.mavlink_udp, mission.ports.http
-    base = f"http://127.0.0.1:{http}"
-    truth = SimTruth(f"{base}/truth.json")
+    run = sim_vehicle_run(mission, start, system_id)
     with ExitStack() as stack:
-        stack.enter_context(
-            sim_vehicle_process(
-                sim_vehicle_command(mission, start, scene_file), out_dir / "sim_vehicle.log", truth.url
-            )
-        )
+        # The relay takes the vehicle's remote port first: a port in use fails before anything starts.
         tlog = stack.enter_context(MavlinkTlogProxy(p + 1, p + 2, out_dir / TLOG_NAME))
-        vehicle = stack.enter_context(MavsdkVehicle(MavsdkConfig(url=f"udpin://127.0.0.1:{p + 2}")))
-        camera = stack.enter_context(StreamCamera(f"{base}/stream.mjpg", timeout_s=3.0, open_timeout_s=10.0))
+        sim = stack.enter_context(
+            SimulatorProcess(
+                "sim_world.mavlink", run_to_json(run), out_dir / "sim_vehicle.log", SIM_READY_PREFIX,
+                start_timeout_s=READY_TIMEOUT_S, name="sim-vehicle",
+            )
+        )  # fmt: skip
+        truth = SimTruth(sim.ready["truth_url"])
+        vehicle = stack.enter_context(
+            MavsdkVehicle(MavsdkConfig(url=f"udpin://127.0.0.1:{p + 2}", expected_system_id=system_id))
+        )
+        camera = stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
         yield simulated_mavlink_kit(
-            mission, models, vehicle, camera, truth, scene, start,
+            mission, models, vehicle, camera, truth, run.scene, start,
             info={
                 "backend": "sim-vehicle subprocess over MAVLink (MAVSDK) + MJPEG stream",
                 "ports": {"sim_udp": p, "tlog_relay_udp": p + 1, "mavsdk_udp": p + 2, "video_http": http},
                 "tlog": "recorded by controller.tlog_proxy between sim-vehicle and MAVSDK",
+                "system_id": system_id,
+                "simulator_pid": sim.pid,
             },
             tlog_path=tlog.path,
         )  # fmt: skip
@@ -222,6 +194,7 @@ def simulated_mavlink_kit(
             **info,
         },
         tlog_path=tlog_path,
+        image_width_px=SIM_IMAGE_PX,
     )
 
 
@@ -246,7 +219,7 @@ def open_real_kit(mission: Mission, out_dir: Path, models: LoadedModels | None =
             url, tlog_path = f"udpin://127.0.0.1:{port + REAL_CLIENT_PORT_SHIFT}", tlog.path
         else:
             log.warning("%s is not a udpin:// link: flying without a .tlog", url)
-        vehicle = stack.enter_context(MavsdkVehicle(MavsdkConfig(url=url)))
+        vehicle = stack.enter_context(MavsdkVehicle(MavsdkConfig(url=url, shown_url=mission.vehicle)))
         camera = stack.enter_context(StreamCamera(mission.camera, timeout_s=3.0, open_timeout_s=10.0))
         planner = models_planner(mission, models, None) or make_planner(
             mission.planner, checkpoint=mission.checkpoint, seed=mission.scene.seed
@@ -261,4 +234,5 @@ def open_real_kit(mission: Mission, out_dir: Path, models: LoadedModels | None =
             instruction=mission.instruction_text(mission.target_kind),
             info={"backend": "MAVSDK + stream camera", "vehicle": mission.vehicle, "camera": mission.camera},
             tlog_path=tlog_path,
+            image_width_px=frame.width,
         )

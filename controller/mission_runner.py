@@ -29,7 +29,7 @@ from controller.centring_loop import CentringConfig, CentringLoop, Outcome, coun
 from controller.flight_kit import FlightKit, LoadedModels
 from controller.mission_schema import PX4_SITL, SIM, SIM_MAVLINK, Mission
 from controller.missions import MissionResult, count_steps, judge
-from controller.report import ReportWriter
+from controller.report import REPORT_JSON, ReportWriter, claim_report_dir, write_setup_failure
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, flight_guard
 from flight.signals import StopRequested
@@ -92,7 +92,6 @@ def fly_kit(
         "setup": kit.info,
         "mission_file": mission.model_dump(mode="json"),
     }
-    writer = ReportWriter(out_dir, header, kit.epsilon_px, media=media)
     loop = CentringLoop(
         vehicle,
         kit.camera,
@@ -100,8 +99,11 @@ def fly_kit(
         kit.planner,
         loop_config(mission, kit.epsilon_px, kit.instruction),
         truth_probe=kit.truth_probe,
-        on_step=writer.add_step,
     )
+    if kit.image_width_px is not None:
+        loop.stop_threshold_px(kit.image_width_px)  # ε against the stopping margin: checked before takeoff
+    writer = ReportWriter(out_dir, header, kit.epsilon_px, media=media)
+    loop.on_step = writer.add_step
     outcome, message, error = Outcome.ABORTED, "", None
     vehicle_start_s = vehicle_end_s = 0.0
     clock: dict[str, float] = {}  # milestones on the vehicle's clock (PX4 SITL's: simulated time)
@@ -189,6 +191,7 @@ def _finish(
         info=kit.info,
         refinement_moves=summary["refinement_moves"],
         vehicle_clock_s=summary["vehicle_clock_s"],
+        files=final["files"],
     )
 
 
@@ -223,7 +226,17 @@ def run_mission(
     media: bool = True,
     models: LoadedModels | None = None,
 ) -> MissionResult:
-    """Build the mission's kit, fly it and write the report folder `out_dir` (`media`: plot and GIF too)."""
-    out_dir = Path(out_dir)
-    with open_kit(mission, out_dir, limits, models) as kit:
-        return fly_kit(kit, mission, out_dir, limits, media)
+    """Build the mission's kit, fly it and write the report folder `out_dir` (`media`: plot and GIF too).
+
+    `out_dir` must not exist or be empty: a report is never written over another
+    (`ReportFolderError`). A mission that cannot start (a bad checkpoint, a camera that
+    does not open, a simulator that fails) still leaves a report saying why, then raises.
+    """
+    out_dir = claim_report_dir(out_dir)
+    try:
+        with open_kit(mission, out_dir, limits, models) as kit:
+            return fly_kit(kit, mission, out_dir, limits, media)
+    except BaseException as exc:
+        if not (out_dir / REPORT_JSON).exists():  # it failed before the flight's own report began
+            write_setup_failure(out_dir, mission, exc)
+        raise

@@ -342,7 +342,9 @@ def load_mission(path: str | Path, overrides: dict[str, Any] | None = None) -> M
     """Read and validate a mission YAML file (see the module docstring for its fields)."""
     path = Path(path)
     data = read_yaml(path, MissionFileError)
-    mission = parse_mission(data, path, overrides)
+    mission = parse_mission(data, path)  # the file alone first: its own errors name the file
+    if overrides:  # then the command line's changes, whose errors name the command line
+        mission = parse_mission(data, f"command-line options over {path}", overrides)
     if isinstance(mission.scene.config, str) and not Path(mission.scene.config).is_absolute():
         # A scene file is found relative to the mission file, so a suite folder can be moved as a whole.
         resolved = (path.parent / mission.scene.config).resolve()

@@ -43,6 +43,8 @@ class MissionResult:
     """Boundary refinement moves the loop flew after the planner chose "no move" (see centring_loop)."""
     info: dict[str, Any] = field(default_factory=dict)
     vehicle_clock_s: dict[str, float] = field(default_factory=dict)
+    files: dict[str, str | None] = field(default_factory=dict)
+    """What the report folder holds: report, trajectory, gif, tlog (None: not written)."""
     """Milestones (connected, ready, offboard) on the vehicle's clock (PX4 SITL: its simulated time)."""
 
     @property

@@ -16,13 +16,19 @@ another run is never flown.
 from __future__ import annotations
 
 import logging
-import secrets
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 from controller.flight_kit import FlightKit, LoadedModels
-from controller.hil import SIM_HFOV_DEG, SIM_IMAGE_PX, TLOG_NAME, SimTruth, simulated_mavlink_kit
+from controller.hil import (
+    SIM_HFOV_DEG,
+    SIM_IMAGE_PX,
+    TLOG_NAME,
+    SimTruth,
+    new_system_id,
+    simulated_mavlink_kit,
+)
 from controller.mission_schema import Mission, StartOffset
 from controller.missions import scene_config_for, start_offset_for, wind_config_for
 from controller.tlog_proxy import MavlinkTlogProxy
@@ -76,7 +82,7 @@ def open_px4_sitl_kit(
 ) -> Iterator[FlightKit]:
     """PX4 SITL + bridge (child process) + tlog relay + MAVSDK + MJPEG camera + detector + planner."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    system_id = 10 + secrets.randbelow(240)  # this run's PX4, and no other
+    system_id = new_system_id()  # this run's PX4, and no other
     with ExitStack() as stack:
         instance = stack.enter_context(px4_instance(mission.px4.instance))
         config = px4_sim_config(mission, instance, out_dir, system_id)

@@ -107,6 +107,65 @@ def timing_summary(steps: list[StepRecord]) -> dict[str, float | None]:
     }
 
 
+class ReportFolderError(FileExistsError):
+    """The report folder already holds something: reports are never written over."""
+
+
+def claim_report_dir(out_dir: str | Path) -> Path:
+    """`out_dir`, created; `ReportFolderError` if it already exists with anything in it.
+
+    A report folder holds one flight: writing a second flight there would truncate the
+    first one's .tlog, replace its report and leave its plot and GIF beside the new one.
+    """
+    out_dir = Path(out_dir)
+    if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
+        held = ", ".join(sorted(p.name for p in out_dir.iterdir())[:4]) if out_dir.is_dir() else "a file"
+        raise ReportFolderError(
+            f"{out_dir} already exists and holds {held}: reports are never overwritten; "
+            "give a new or empty folder"
+        )
+    out_dir.mkdir(parents=True, exist_ok=True)
+    return out_dir
+
+
+def fresh_report_dir(base: str | Path) -> Path:
+    """`base`, or `base-2`, `base-3`, ... : the first that does not exist yet (for default folder names)."""
+    base = Path(base)
+    candidate, n = base, 1
+    while candidate.exists():
+        n += 1
+        candidate = base.with_name(f"{base.name}-{n}")
+    return candidate
+
+
+def write_setup_failure(out_dir: Path, mission: Any, error: BaseException) -> None:
+    """The report of a mission that could not start (or was stopped before its flight's report began)."""
+    how = (
+        f"{type(error).__name__}: {error}"
+        if not isinstance(error, KeyboardInterrupt)
+        else f"interrupted ({error or 'SIGINT'})"
+    )
+    data = {
+        "mission": mission.name,
+        "tags": list(mission.tags),
+        "planner": mission.planner,
+        "vehicle": mission.vehicle,
+        "camera": mission.camera,
+        "mission_file": mission.model_dump(mode="json"),
+        "status": "failed_to_start",
+        "outcome": "error",
+        "passed": False,
+        "error": how,
+        "steps": [],
+        "files": {"report": REPORT_JSON, "trajectory": None, "gif": None, "tlog": None},
+    }
+    try:
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        _write_json_atomic(Path(out_dir) / REPORT_JSON, data)
+    except OSError as exc:
+        log.error("could not write the report of %s: %s", out_dir, exc)
+
+
 def _write_json_atomic(path: Path, data: dict[str, Any]) -> None:
     tmp = path.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(data, indent=1), encoding="utf-8")

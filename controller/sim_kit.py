@@ -102,4 +102,5 @@ def open_sim_kit(
             truth_probe=probe,
             place_at_start=place_at_start,
             info=info,
+            image_width_px=camera_config.width,
         )

@@ -21,6 +21,7 @@ from typing import Any
 
 from controller.mission_schema import PX4_SITL, SIM_MAVLINK, Mission, PortSpec, load_mission
 from controller.missions import MissionResult, load_suite
+from controller.report import claim_report_dir
 
 log = logging.getLogger(__name__)
 
@@ -137,7 +138,7 @@ def run_suite(directory: str | Path, options: SuiteOptions) -> SuiteResult:
             f"no mission in {directory} matches tags {options.tags} minus {options.exclude_tags}"
         )
     missions = assign_ports(missions, options)
-    out = Path(options.report_dir)
+    out = claim_report_dir(options.report_dir)  # a suite's reports never go over an earlier run's
     results: dict[str, MissionResult] = {}
     if options.parallel == 1:
         for mission in missions:

@@ -70,6 +70,8 @@ class MavsdkConfig:
     climb_done_speed_m_s: float = 0.2  # takeoff ends when the climb has (nearly) stopped
     poll_s: float = 0.02
     expected_system_id: int | None = None
+    shown_url: str | None = None
+    """The vehicle's URL as the user gave it, for messages, when MAVSDK listens behind a relay elsewhere."""
     clock: str = "wall"  # or "vehicle": the autopilot's clock (see the module docstring)
 
     def __post_init__(self) -> None:
@@ -142,7 +144,7 @@ class MavsdkVehicle(Vehicle):
                 else ""
             )
             self.close()
-            raise VehicleConnectionError("connect()", result.name, f"cannot open {url}{hint}")
+            raise VehicleConnectionError("connect()", result.name, f"cannot open {self._where()}{hint}")
         system = (
             self._mavsdk.first_autopilot(timeout_s)
             if self.config.expected_system_id is None
@@ -153,9 +155,9 @@ class MavsdkVehicle(Vehicle):
             raise VehicleConnectionError(
                 "connect()",
                 "NO_AUTOPILOT",
-                f"no autopilot heartbeat on {url} within {timeout_s:.1f} s: is the vehicle running and "
-                "sending to this address and port? (PX4 SITL and `dronectl sim-vehicle` send to 14540 "
-                "by default)",
+                f"no autopilot heartbeat on {self._where()} within {timeout_s:.1f} s: is the vehicle "
+                "running and sending to this address and port? (PX4 SITL and `dronectl sim-vehicle` send "
+                "to 14540 by default)",
             )
         self._link = LinkMonitor(self.config.link_timeout_s)
         # Keep every MAVSDK object referenced for the connection's life: a plugin left to the
@@ -176,6 +178,11 @@ class MavsdkVehicle(Vehicle):
                 time.sleep(0.01)
         log.info("connected to an autopilot on %s (system id %d)", url, system.get_system_id())
 
+    def _where(self) -> str:
+        """The URL for messages: the user's, and where MAVSDK really listens if that differs."""
+        shown, url = self.config.shown_url, self.config.url
+        return url if shown is None or shown == url else f"{shown} (relayed to MAVSDK on {url})"
+
     def _autopilot_with_id(self, system_id: int, timeout_s: float) -> Any:
         """The autopilot with this system id; VehicleConnectionError naming any other that answered."""
         assert self._mavsdk is not None
@@ -194,7 +201,7 @@ class MavsdkVehicle(Vehicle):
             raise VehicleConnectionError(
                 "connect()",
                 "WRONG_VEHICLE",
-                f"{self.config.url}: heard system id {sorted(others)} but not {system_id}, the vehicle "
+                f"{self._where()}: heard system id {sorted(others)} but not {system_id}, the vehicle "
                 "this run launched: refusing to fly another vehicle",
             )
         return None

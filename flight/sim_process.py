@@ -1,16 +1,18 @@
-"""`SimVehicleProcess`: `dronectl sim-vehicle` in a child process, for the flight tests and benchmark.
+"""`SimVehicleProcess`: the simulated MAVLink vehicle in a child process, for the flight tests and benchmark.
 
 The controller side then talks to it exactly as to PX4 SITL: over real UDP on
-loopback, through MAVSDK. The child's output goes to a log file, so a test that
-fails can show what the vehicle said. `kill()` is a hard stop (link loss).
+loopback, through MAVSDK. It runs the simulator's own entry point
+(`python -m sim_world.mavlink`) through `flight.sim_launcher.SimulatorProcess`, so
+it lives in its own session, dies with its parent, and is ready when it says so.
+The child's output goes to a log file, so a test that fails can show what the
+vehicle said. `kill()` is a hard stop (link loss).
 """
 
 from __future__ import annotations
 
 import json
-import logging
-import subprocess
-import sys
+import os
+import signal
 import tempfile
 import time
 import urllib.request
@@ -19,11 +21,11 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-from flight.errors import FlightTimeoutError, VehicleConnectionError
-
-log = logging.getLogger(__name__)
-
-_READY_LINE = "sim-vehicle ready"
+from flight.errors import VehicleConnectionError
+from flight.sim_launcher import SimulatorProcess, SimulatorStartError
+from sim_world.mavlink.commander import CommanderConfig
+from sim_world.mavlink.config import SimVehicleConfig
+from sim_world.sim_vehicle_main import READY_PREFIX, SimVehicleRun, run_to_json
 
 
 @dataclass(frozen=True)
@@ -39,77 +41,75 @@ class SimVehicleOptions:
     image_size_px: int = 64
     video_fps: float = 2.0
     seed: int = 0
+    sysid: int | None = None
 
-    def argv(self) -> list[str]:
-        args = ["--local-port", str(self.local_port), "--remote-port", str(self.remote_port)]
-        args += ["--speed", str(self.speed), "--boot-delay", str(self.boot_delay_s), "--seed", str(self.seed)]
-        args += ["--status-every", "0"]
-        if self.video_port is None:
-            args.append("--no-video")
-        else:
-            args += ["--video-port", str(self.video_port), "--size", str(self.image_size_px)]
-            args += ["--video-fps", str(self.video_fps)]
-        for name, value in self.params:
-            args += ["--param", f"{name}={value}"]
-        return args
+    def run(self) -> SimVehicleRun:
+        vehicle = SimVehicleConfig(
+            local_port=self.local_port,
+            remote_port=self.remote_port,
+            sysid=self.sysid,
+            speed=self.speed,
+            commander=CommanderConfig(arming_boot_delay_s=self.boot_delay_s),
+            params=dict(self.params),
+            video=self.video_port is not None,
+            video_port=self.video_port,
+            video_fps=self.video_fps,
+        )
+        return SimVehicleRun(vehicle=vehicle, seed=self.seed, image_size_px=self.image_size_px)
 
 
 class SimVehicleProcess:
-    """Starts the child at construction and waits until its ports are open."""
+    """Starts the child at construction and waits until it says it is ready."""
 
     def __init__(self, options: SimVehicleOptions, start_timeout_s: float = 30.0) -> None:
         self.options = options
-        self._log_file = tempfile.NamedTemporaryFile(prefix="sim-vehicle-", suffix=".log", delete=False)  # noqa: SIM115
-        self.log_path = Path(self._log_file.name)
-        command = [sys.executable, "-m", "tools.dronectl", "sim-vehicle", *options.argv()]
+        self._folder = Path(tempfile.mkdtemp(prefix="sim-vehicle-"))
+        self.log_path = self._folder / "sim_vehicle.log"
         self.started_s = time.perf_counter()
-        self._process = subprocess.Popen(command, stdout=self._log_file, stderr=subprocess.STDOUT)
+        self._process = SimulatorProcess(
+            "sim_world.mavlink",
+            run_to_json(options.run()),
+            self.log_path,
+            READY_PREFIX,
+            start_timeout_s=start_timeout_s,
+            name="sim-vehicle",
+        )
         try:
-            self._wait_ready(start_timeout_s)
-        except BaseException:
-            self.close()
-            raise
+            self._process.start()
+        except SimulatorStartError as exc:
+            raise VehicleConnectionError("SimVehicleProcess()", "NOT_STARTED", str(exc)) from None
 
-    def _wait_ready(self, timeout_s: float) -> None:
-        deadline = time.monotonic() + timeout_s
-        while _READY_LINE not in self.output():
-            if self._process.poll() is not None:
-                raise VehicleConnectionError(
-                    "SimVehicleProcess()", f"EXITED_{self._process.returncode}", self.output()[-2000:]
-                )
-            if time.monotonic() > deadline:
-                raise FlightTimeoutError("SimVehicleProcess()", timeout_s, f"{_READY_LINE!r} line")
-            time.sleep(0.05)
+    @property
+    def ready(self) -> dict[str, Any]:
+        return self._process.ready
 
     def output(self) -> str:
-        return self.log_path.read_text(errors="replace")
+        return self._process.output()
 
     @property
     def alive(self) -> bool:
-        return self._process.poll() is None
+        return self._process.alive
 
     def truth(self, timeout_s: float = 2.0) -> dict[str, Any]:
         """The sim's /truth.json (drone pose, target in the image): for tests, never for a controller."""
-        if self.options.video_port is None:
+        url = self.ready.get("truth_url")
+        if not url:
             raise RuntimeError("this sim-vehicle runs without video, so it serves no truth endpoint")
-        url = f"http://127.0.0.1:{self.options.video_port}/truth.json"
         with urllib.request.urlopen(url, timeout=timeout_s) as response:
             return json.loads(response.read())["truth"]
 
     def kill(self) -> None:
         """Stop dead, like a crashed vehicle or a cut cable: no goodbye on the link."""
-        self._process.kill()
-        self._process.wait(timeout=5.0)
+        pid = self._process.pid
+        if pid is not None and self.alive:
+            os.killpg(pid, signal.SIGKILL)
+        self._process.close()
 
     def close(self) -> None:
-        if self.alive:
-            self._process.terminate()
-            try:
-                self._process.wait(timeout=5.0)
-            except subprocess.TimeoutExpired:
-                self.kill()
-        self._log_file.close()
-        self.log_path.unlink(missing_ok=True)
+        self._process.close()
+        for path in self._folder.iterdir():
+            path.unlink(missing_ok=True)
+        self._folder.rmdir()
 
     def __enter__(self) -> SimVehicleProcess:
         return self

@@ -12,16 +12,20 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
-from pathlib import Path
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any, TextIO
 
 from sim_world.camera import CameraConfig
+from sim_world.mavlink.commander import CommanderConfig
 from sim_world.mavlink.config import SimVehicleConfig
 from sim_world.mavlink.params import PX4_PARAMS
-from sim_world.mavlink.video import VideoConfig, WorldVideoFeed
+from sim_world.mavlink.video import VideoConfig, VideoError, WorldVideoFeed
 from sim_world.mavlink.world_model import WorldVehicleModel
-from sim_world.mavlink_vehicle import LoopStats, SimVehicle
-from sim_world.scene_config import DEFAULT_SCENE, load_scene_config
+from sim_world.mavlink_vehicle import LoopStats, SimVehicle, SimVehicleError
+from sim_world.process_entry import say_ready, stop_on_signals
+from sim_world.process_entry import watch_parent as parent_watch
+from sim_world.scene_config import DEFAULT_SCENE, SceneConfig, parse_scene_config
+from sim_world.wind import WindConfig
 from sim_world.world import World, WorldConfig
 
 log = logging.getLogger(__name__)
@@ -59,19 +63,30 @@ class SimVehicleRun:
     """Everything `dronectl sim-vehicle` needs: the vehicle, the world and how long to run."""
 
     vehicle: SimVehicleConfig = field(default_factory=SimVehicleConfig)
-    scene_file: Path | None = None
+    scene: SceneConfig = DEFAULT_SCENE
     seed: int = 0
     start_offset: StartOffset | None = None
     image_size_px: int = 224
     duration_s: float | None = None  # None: until stopped
     status_every_s: float = 0.0  # log the loop statistics this often (0: never)
+    wind: WindConfig = field(default_factory=WindConfig)
+
+
+@dataclass(frozen=True)
+class SimVehicleReady:
+    """What the ready line says: where to connect, and the vehicle's MAVLink system id."""
+
+    mavlink_url: str
+    system_id: int
+    local_address: list[Any]
+    video_url: str | None
+    truth_url: str | None
 
 
 def build_world(run: SimVehicleRun) -> tuple[World, SimVehicleConfig]:
     """The world with the drone placed, and the vehicle config with MIS_TAKEOFF_ALT filled in."""
-    scene = DEFAULT_SCENE if run.scene_file is None else load_scene_config(run.scene_file)
     camera = CameraConfig(width=run.image_size_px, height=run.image_size_px)
-    world = World(WorldConfig(scene=scene, camera=camera), seed=run.seed)
+    world = World(WorldConfig(scene=run.scene, camera=camera, wind=run.wind), seed=run.seed)
     vehicle = run.vehicle
     if run.start_offset is not None:
         o = run.start_offset
@@ -127,3 +142,83 @@ def run_sim_vehicle(
                     )  # fmt: skip
             stats = vehicle.stats()
     return stats
+
+
+# --------------------------------------------------------------------------- serving a process
+READY_PREFIX = "sim-vehicle ready: "
+
+
+def serve(
+    run: SimVehicleRun, out: TextIO, watch_parent: bool = False, extra_stop: threading.Event | None = None
+) -> int:
+    """Serve until SIGINT, SIGTERM, SIGHUP (or the parent's death, with `watch_parent`); an exit code.
+
+    Prints `sim-vehicle ready: {json}` once the ports are open (`SimVehicleReady`) and a summary
+    at the end. 0: stopped as asked; 1: the vehicle could not start or failed (a port in use, a
+    bad scene): the reason is printed, and nothing keeps running.
+    """
+    stop = extra_stop or stop_on_signals("sim-vehicle")
+    if watch_parent:
+        parent_watch(stop, "sim-vehicle")
+
+    def ready(vehicle: SimVehicle) -> None:
+        cfg = vehicle.config
+        info = SimVehicleReady(
+            mavlink_url=cfg.connection_url(),
+            system_id=cfg.system_id,
+            local_address=list(vehicle.local_address),
+            video_url=vehicle.video_url,
+            truth_url=vehicle.truth_url,
+        )
+        say_ready(out, READY_PREFIX, info)
+
+    try:
+        stats = run_sim_vehicle(run, stop, on_ready=ready)
+    except (OSError, SimVehicleError, VideoError) as exc:
+        out.write(f"sim-vehicle failed: {exc}\n")
+        out.flush()
+        return 1
+    out.write(
+        f"sim-vehicle: {stats.sim_s:.1f} s simulated in {stats.wall_s:.1f} s "
+        f"(x{stats.real_time_factor:.2f} real time), {stats.video_frames} video frames\n"
+    )
+    out.flush()
+    return 0
+
+
+def run_to_json(run: SimVehicleRun) -> dict[str, Any]:
+    """The run as JSON for the process entry point (`python -m sim_world.mavlink --config FILE`)."""
+    v = run.vehicle
+    return {
+        "vehicle": {
+            "instance": v.instance, "bind_host": v.bind_host, "remote_host": v.remote_host,
+            "remote_port": v.remote_port, "local_port": v.local_port, "sysid": v.sysid, "speed": v.speed,
+            "arming_boot_delay_s": v.commander.arming_boot_delay_s, "params": dict(v.params),
+            "video": v.video, "video_port": v.video_port, "video_host": v.video_host,
+            "video_fps": v.video_fps,
+        },
+        "scene": run.scene.model_dump(mode="json"),
+        "seed": run.seed,
+        "start_offset": None if run.start_offset is None else asdict(run.start_offset),
+        "image_size_px": run.image_size_px,
+        "duration_s": run.duration_s,
+        "status_every_s": run.status_every_s,
+        "wind": asdict(run.wind),
+    }  # fmt: skip
+
+
+def run_from_json(data: dict[str, Any]) -> SimVehicleRun:
+    """The inverse of `run_to_json` (validated by the dataclasses and the scene model)."""
+    v = dict(data["vehicle"])
+    commander = CommanderConfig(arming_boot_delay_s=float(v.pop("arming_boot_delay_s")))
+    wind = {k: tuple(x) if isinstance(x, list) else x for k, x in data["wind"].items()}
+    return SimVehicleRun(
+        vehicle=SimVehicleConfig(commander=commander, **v),
+        scene=parse_scene_config(data["scene"], "<sim-vehicle config>"),
+        seed=int(data["seed"]),
+        start_offset=None if data["start_offset"] is None else StartOffset(**data["start_offset"]),
+        image_size_px=int(data["image_size_px"]),
+        duration_s=data["duration_s"],
+        status_every_s=float(data["status_every_s"]),
+        wind=WindConfig(**wind),
+    )

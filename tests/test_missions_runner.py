@@ -135,3 +135,48 @@ def test_default_mission_in_process_ends_centred_per_truth(
     assert report["steps"][0]["distances"] is not None and len(report["steps"][0]["distances"]) == 9
     out = capsys.readouterr().out
     assert "PASS  default: centred" in out and str(tmp_path / "report.json") in out
+
+
+def test_an_epsilon_inside_the_stopping_margin_is_refused_before_the_vehicle_is_touched(
+    tmp_path: Path,
+) -> None:
+    vehicle = FakeVehicle(east_m=-0.5)
+    kit = kit_for(vehicle, ClassicPlanner())
+    kit.epsilon_px, kit.image_width_px = 2.0, 224  # the default margin is 2 px at 224 px
+    mission = parse_mission({"name": "tiny-eps", "planner": "classic", "epsilon_px": 2.0})
+    with pytest.raises(ValueError, match="leaves nothing inside the stopping margin"):
+        fly_kit(kit, mission, tmp_path, LIMITS)
+    assert vehicle.calls == []  # never connected, never armed: nothing flew
+
+
+def test_a_report_folder_that_holds_a_flight_is_never_written_over(tmp_path: Path) -> None:
+    from controller.mission_runner import run_mission
+    from controller.report import ReportFolderError
+
+    earlier = tmp_path / "earlier"
+    earlier.mkdir()
+    (earlier / "flight.tlog").write_bytes(b"x" * 80_000)
+    (earlier / "report.json").write_text('{"status": "finished"}')
+    mission = parse_mission({"name": "again", "planner": "classic"})
+    with pytest.raises(ReportFolderError, match="never overwritten"):
+        run_mission(mission, earlier)
+    assert (earlier / "flight.tlog").stat().st_size == 80_000
+    assert read_report(earlier) == {"status": "finished"}
+    assert sorted(p.name for p in earlier.iterdir()) == ["flight.tlog", "report.json"]
+
+
+def test_a_mission_that_cannot_start_still_writes_a_report_saying_why(tmp_path: Path) -> None:
+    from controller.mission_runner import run_mission
+
+    broken = tmp_path / "ckpt"
+    broken.mkdir()
+    (broken / "config.json").write_text("{")  # a truncated checkpoint
+    (broken / "model.safetensors").write_bytes(b"\x00" * 10)
+    mission = parse_mission({"name": "bad-ckpt", "checkpoint": str(broken), "scene": {"seed": 3}})
+    out = tmp_path / "report"
+    with pytest.raises(Exception) as info:
+        run_mission(mission, out, media=True)
+    report = read_report(out)
+    assert report["status"] == "failed_to_start" and report["passed"] is False
+    assert str(info.value).split("\n")[0][:40] in report["error"]
+    assert report["files"]["gif"] is None and not (out / "camera.gif").exists()

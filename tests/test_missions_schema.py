@@ -111,3 +111,23 @@ def test_the_shipped_suite_is_valid_and_covers_what_ci_needs() -> None:
     assert any(m.wind is not None for m in missions)
     default = load_mission(MISSIONS_DIR.parent / "default.yaml")
     assert default.vehicle == "sim" and default.planner == "latent" and default.checkpoint is None
+
+
+def test_a_camera_url_with_a_simulated_vehicle_is_refused_not_ignored(tmp_path: Path) -> None:
+    for vehicle in ("sim-mavlink", "px4-sitl"):
+        path = write(tmp_path, f"name: x\nvehicle: {vehicle}\ncamera: http://10.0.0.2:8080/stream.mjpg\n")
+        with pytest.raises(MissionFileError) as info:
+            load_mission(path)
+        assert info.value.field == "camera" and "streams its own camera" in info.value.reason
+
+
+def test_errors_in_command_line_overrides_name_the_command_line_not_the_file(tmp_path: Path) -> None:
+    path = write(tmp_path, "name: x\n")
+    with pytest.raises(MissionFileError) as info:
+        load_mission(path, {"epsilon_px": -2.0})
+    assert info.value.field == "epsilon_px"
+    assert info.value.path.startswith("command-line options over")
+    broken = write(tmp_path, "name: x\nmax_steps: 0\n")
+    with pytest.raises(MissionFileError) as info:
+        load_mission(broken, {"epsilon_px": 5.0})
+    assert info.value.path == str(broken)  # the file's own error is still the file's

@@ -73,7 +73,7 @@ def test_dronectl_sim_vehicle_rejects_bad_options_with_a_clear_message():
         text=True,
         timeout=60,
     )
-    assert missing.returncode == 1 and "/nonexistent/scene.yaml" in missing.stderr
+    assert missing.returncode == 2 and "/nonexistent/scene.yaml" in missing.stderr  # named before it starts
 
 
 def test_camera_is_served_as_mjpeg_with_per_frame_truth():

@@ -18,6 +18,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from controller.benchmark_missions import BenchmarkConfig, format_summary, run_benchmark
+from controller.report import ReportFolderError
 from sim_world.px4_bridge.px4_process import Px4FolderError, find_px4_dir
 
 
@@ -64,7 +65,9 @@ def main(argv: list[str]) -> int:
     )
     parser.add_argument("--parallel", type=int, default=1, help="worker processes (default: 1)")
     parser.add_argument("--json", type=Path, help="write the summary and every mission's row here")
-    parser.add_argument("--report", type=Path, help="keep each mission's report.json under this folder")
+    parser.add_argument(
+        "--report", type=Path, help="keep each mission's report.json under this folder (new or empty)"
+    )
     args = parser.parse_args(argv)
     logging.getLogger().setLevel(logging.WARNING)
     try:
@@ -82,7 +85,11 @@ def main(argv: list[str]) -> int:
         return 2
     except ValueError as exc:
         parser.error(str(exc))
-    summary = run_benchmark(config, report_dir=args.report)
+    try:
+        summary = run_benchmark(config, report_dir=args.report)
+    except ReportFolderError as exc:
+        print(f"dronectl benchmark-missions: --report {exc}", file=sys.stderr)
+        return 2
     print(format_summary(summary))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -92,9 +92,9 @@ def summary_lines(result: MissionResult) -> list[str]:
         lines.append(f"      loop overhead: {result.overhead_ms_mean:.1f} ms per step (besides the move)")
     lines += [f"      - {failure}" for failure in result.failures]
     if result.report_dir:
-        lines.append(
-            f"      report: {Path(result.report_dir) / 'report.json'} (+ trajectory.png, camera.gif)"
-        )
+        extra = [name for key, name in result.files.items() if name and key != "report"]
+        also = f" (+ {', '.join(extra)})" if extra else ""
+        lines.append(f"      report: {Path(result.report_dir) / 'report.json'}{also}")
     return lines
 
 
@@ -115,7 +115,12 @@ def main(argv: list[str]) -> int:
         help="px4-sitl: simulated seconds per wall second, or 'max' (default: the mission's, 1)",
     )
     parser.add_argument("--camera", help="override the camera: sim or a stream URL")
-    parser.add_argument("--out", type=Path, help="report folder (default: runs/fly/<mission>-<time>)")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        help="report folder; must be new or empty: a report is never written over another "
+        "(default: a fresh runs/fly/<mission>-<time>)",
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="log every module's progress")
     args = parser.parse_args(argv)
     if not args.verbose:
@@ -129,14 +134,21 @@ def main(argv: list[str]) -> int:
     except (MissionFileError, ValueError) as exc:
         print(f"dronectl fly: {exc}", file=sys.stderr)
         return 2
-    out = args.out or Path("runs") / "fly" / f"{mission.name}-{time.strftime('%Y%m%d-%H%M%S')}"
-    print(f"flying {mission.name} ({mission.vehicle}, planner {mission.planner}) ...", flush=True)
     from controller.mission_runner import run_mission
+    from controller.report import ReportFolderError, claim_report_dir, fresh_report_dir
 
+    default_out = Path("runs") / "fly" / f"{mission.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    try:
+        out = claim_report_dir(args.out or fresh_report_dir(default_out))
+    except ReportFolderError as exc:
+        print(f"dronectl fly: --out {exc}", file=sys.stderr)
+        return 2
+    print(f"flying {mission.name} ({mission.vehicle}, planner {mission.planner}) ...", flush=True)
     try:
         result = run_mission(mission, out)
     except Exception as exc:  # could not start: a clear line, not a traceback
         print(f"dronectl fly: {mission.name} could not start: {type(exc).__name__}: {exc}", file=sys.stderr)
+        print(f"      report: {out / 'report.json'} (why it did not start)", file=sys.stderr)
         return 1
     print("\n".join(summary_lines(result)))
     return 0 if result.passed else 1

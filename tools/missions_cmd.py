@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 from controller.mission_schema import PLANNER_NAMES, MissionFileError
+from controller.report import ReportFolderError, fresh_report_dir
 from controller.suite import SuiteOptions, format_table, run_suite, write_junit
 
 
@@ -23,7 +24,11 @@ def main(argv: list[str]) -> int:
     run = sub.add_parser("run", help="fly every mission of a folder")
     run.add_argument("directory", type=Path, help="folder of mission YAML files")
     run.add_argument("--junit", type=Path, help="write JUnit XML here")
-    run.add_argument("--report", type=Path, help="report folders go here (default: runs/missions/<time>)")
+    run.add_argument(
+        "--report",
+        type=Path,
+        help="report folders go here; new or empty (default: a fresh runs/missions/<time>)",
+    )
     run.add_argument("--parallel", type=int, default=1, help="missions flown at once, one process each")
     run.add_argument(
         "--tag", action="append", default=[], help="fly only missions with this tag (repeatable)"
@@ -43,7 +48,7 @@ def main(argv: list[str]) -> int:
     args = parser.parse_args(argv)
     if not args.verbose:
         logging.getLogger().setLevel(logging.WARNING)
-    report = args.report or Path("runs") / "missions" / time.strftime("%Y%m%d-%H%M%S")
+    report = args.report or fresh_report_dir(Path("runs") / "missions" / time.strftime("%Y%m%d-%H%M%S"))
     chosen = {"planner": args.planner, "detector": args.detector, "checkpoint": args.checkpoint}
     overrides = {key: value for key, value in chosen.items() if value is not None} or None
     try:
@@ -56,7 +61,7 @@ def main(argv: list[str]) -> int:
             px4_dir=None if args.px4 is None else str(args.px4.resolve()),
         )
         suite = run_suite(args.directory, options)
-    except (MissionFileError, ValueError) as exc:
+    except (MissionFileError, ValueError, ReportFolderError) as exc:
         print(f"dronectl missions: {exc}", file=sys.stderr)
         return 2
     print(format_table(suite))

@@ -7,17 +7,14 @@ Ports follow PX4 SITL for instance N: binds UDP 14580+N, sends to 127.0.0.1:1454
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
-import threading
 from pathlib import Path
 
 from sim_world.mavlink.commander import CommanderConfig
 from sim_world.mavlink.config import SimVehicleConfig
 from sim_world.mavlink.params import ParamError, parse_param_overrides
-from sim_world.mavlink_vehicle import SimVehicle, SimVehicleError
-from sim_world.scene_config import SceneConfigError
-from sim_world.sim_vehicle_main import SimVehicleRun, StartOffset, run_sim_vehicle
+from sim_world.scene_config import DEFAULT_SCENE, SceneConfigError, load_scene_config
+from sim_world.sim_vehicle_main import SimVehicleRun, StartOffset, serve
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -77,41 +74,14 @@ def main(argv: list[str]) -> int:
         )
         run = SimVehicleRun(
             vehicle=vehicle,
-            scene_file=args.scene,
+            scene=DEFAULT_SCENE if args.scene is None else load_scene_config(args.scene),
             seed=args.seed,
             start_offset=StartOffset.parse(args.start_offset) if args.start_offset else None,
             image_size_px=args.size,
             duration_s=args.duration,
             status_every_s=args.status_every,
         )
-    except (ValueError, ParamError) as exc:
+    except (ValueError, ParamError, SceneConfigError) as exc:
         print(f"dronectl sim-vehicle: {exc}", file=sys.stderr)
         return 2
-
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-
-    def ready(v: SimVehicle) -> None:
-        host, port = v.local_address
-        remote = f"{vehicle.remote_host}:{vehicle.mavlink_remote_port}"
-        video = f", video {v.video_url}, truth {v.truth_url}" if v.video_url else ""
-        print(
-            f"sim-vehicle ready: MAVLink udp {host}:{port} -> {remote} "
-            f"(connect with {vehicle.connection_url()}){video}",
-            flush=True,
-        )
-
-    try:
-        stats = run_sim_vehicle(run, stop, on_ready=ready)
-    except KeyboardInterrupt:
-        print("sim-vehicle: stopped", file=sys.stderr)
-        return 0
-    except (SceneConfigError, OSError, SimVehicleError) as exc:
-        print(f"dronectl sim-vehicle: {exc}", file=sys.stderr)
-        return 1
-    print(
-        f"sim-vehicle: {stats.sim_s:.1f} s simulated in {stats.wall_s:.1f} s "
-        f"(x{stats.real_time_factor:.2f} real time), {stats.video_frames} video frames",
-        flush=True,
-    )
-    return 0
+    return serve(run, sys.stdout)

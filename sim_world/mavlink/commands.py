@@ -105,6 +105,13 @@ class MessageHandler:
             ]
         if kind == "TIMESYNC" and msg.tc1 == 0:
             return [M.MAVLink_timesync_message(int((self._clock() - self._t0) * 1e9), msg.ts1)]
+        if kind == "MISSION_REQUEST_LIST" and self._for_us(msg, component=True):
+            # No stored mission (plans, fences, rally points): PX4 answers an empty list the same way.
+            return [
+                M.MAVLink_mission_count_message(
+                    msg.get_srcSystem(), msg.get_srcComponent(), 0, msg.mission_type
+                )
+            ]
         return []
 
     def _for_us(self, msg: mavlink.MAVLink_message, component: bool) -> bool:

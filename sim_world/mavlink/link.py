@@ -18,6 +18,7 @@ from pymavlink.dialects.v20 import common as mavlink
 log = logging.getLogger(__name__)
 
 Address = tuple[str, int]
+_MAX_PEERS = 64
 
 
 class LinkError(OSError):
@@ -68,15 +69,20 @@ class UdpMavlinkLink:
                 continue  # an ICMP "port unreachable" from an earlier send: nobody listening yet
             parser = self._parsers.get(addr)
             if parser is None:
+                if len(self._parsers) >= _MAX_PEERS:  # a flood of strangers: forget them, keep listening
+                    self._parsers.clear()
                 parser = self._parsers[addr] = mavlink.MAVLink(None)
                 parser.robust_parsing = True
+            valid = False
             for msg in parser.parse_buffer(data) or []:
-                if isinstance(msg, mavlink.MAVLink_bad_data):
-                    self.stats.bad += 1
+                if isinstance(msg, (mavlink.MAVLink_bad_data, mavlink.MAVLink_unknown)):
+                    self.stats.bad += 1  # (an unknown id cannot be CRC-checked: random bytes pass as one)
                     continue
                 self.stats.received += 1
                 out.append((msg, addr))
-            self.last_sender = addr
+                valid = True
+            if valid:  # only a peer that speaks MAVLink becomes a telemetry destination
+                self.last_sender = addr
 
     def destinations(self) -> list[Address]:
         if self.last_sender is None or self.last_sender == self.remote:

@@ -9,10 +9,7 @@ goes away. Everything is closed in reverse order on every way out.
 
 from __future__ import annotations
 
-import json
 import logging
-import os
-import signal
 import threading
 import time
 from collections.abc import Callable
@@ -22,6 +19,8 @@ from typing import Any, TextIO
 
 from sim_world.camera import CameraConfig
 from sim_world.mavlink.video import VideoConfig, VideoError, WorldVideoFeed
+from sim_world.process_entry import say_ready, stop_on_signals
+from sim_world.process_entry import watch_parent as parent_watch
 from sim_world.px4_bridge.bridge import BridgeStats, BridgeTiming, CameraClock, Px4Bridge
 from sim_world.px4_bridge.geodesy import HomePoint, magnetic_field_ned_gauss
 from sim_world.px4_bridge.link import (
@@ -274,25 +273,13 @@ def serve(config: Px4SimConfig, out: TextIO, watch_parent: bool = False) -> int:
 
     Prints one line `px4-sim ready: {json}` to `out` once PX4 answers in lockstep (URLs,
     PX4's system id), and a summary at the end. 0: stopped as asked; 1: PX4 or the
-    simulator failed (the reason is logged).
+    simulator failed (the reason is logged and printed).
     """
-    stop = threading.Event()
-
-    def on_signal(signum: int, _frame: object) -> None:
-        log.info("px4-sim: %s received, stopping", signal.Signals(signum).name)
-        stop.set()
-
-    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        signal.signal(signum, on_signal)
+    stop = stop_on_signals("px4-sim")
     if watch_parent:
-        _watch_parent(stop)
-
-    def ready(info: Px4SimReady) -> None:
-        out.write(READY_PREFIX + json.dumps(asdict(info)) + "\n")
-        out.flush()
-
+        parent_watch(stop, "px4-sim")
     try:
-        stats = run_px4_sim(config, stop, on_ready=ready)
+        stats = run_px4_sim(config, stop, on_ready=lambda info: say_ready(out, READY_PREFIX, info))
     except (Px4StartError, Px4DisconnectedError, SimulatorLinkError, VideoError, OSError) as exc:
         log.error("px4-sim: %s", exc)
         out.write(f"px4-sim failed: {exc}\n")
@@ -304,19 +291,3 @@ def serve(config: Px4SimConfig, out: TextIO, watch_parent: bool = False) -> int:
     )
     out.flush()
     return 0
-
-
-def _watch_parent(stop: threading.Event, poll_s: float = 0.5, grace_s: float = 10.0) -> None:
-    """Stop when the process that started us is gone (re-parented), then exit hard if stopping hangs."""
-    parent = os.getppid()
-
-    def watch() -> None:
-        while not stop.is_set():
-            if os.getppid() != parent:
-                log.warning("px4-sim: parent process %d is gone: stopping", parent)
-                stop.set()
-                time.sleep(grace_s)
-                os._exit(3)
-            time.sleep(poll_s)
-
-    threading.Thread(target=watch, name="parent-watch", daemon=True).start()

@@ -1,0 +1,65 @@
+"""What every simulator process does the same way: stop on signals, stop when its parent is gone, say ready.
+
+A simulator (`sim-vehicle`, the PX4 bridge) runs either from a person's terminal
+(`dronectl sim-vehicle`, `dronectl px4-sim`) or as the child of a mission
+(`python -m <package> --config FILE.json`, started by `flight.sim_launcher`). Either way:
+
+- SIGINT, SIGTERM and SIGHUP set a stop event: the simulator closes its ports and its
+  own children (the render process, PX4) and exits 0;
+- as a child (`watch_parent=True`) it also stops when its parent process is gone,
+  however the parent died (SIGKILL included): the parent is polled every 0.5 s, and a
+  stop that hangs for 10 s ends the process hard;
+- it prints one line `<prefix>{json}` when it is ready, which launchers wait for.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import signal
+import threading
+import time
+from dataclasses import asdict, is_dataclass
+from typing import Any, TextIO
+
+log = logging.getLogger(__name__)
+
+PARENT_POLL_S = 0.5
+STOP_GRACE_S = 10.0
+
+
+def stop_on_signals(name: str) -> threading.Event:
+    """An event that SIGINT, SIGTERM and SIGHUP set (main thread only)."""
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: object) -> None:
+        log.info("%s: %s received, stopping", name, signal.Signals(signum).name)
+        stop.set()
+
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, on_signal)
+    return stop
+
+
+def watch_parent(stop: threading.Event, name: str) -> None:
+    """Set `stop` when our parent is gone (we are re-parented); exit hard if stopping then hangs."""
+    parent = os.getppid()
+
+    def watch() -> None:
+        while not stop.is_set():
+            if os.getppid() != parent:
+                log.warning("%s: parent process %d is gone: stopping", name, parent)
+                stop.set()
+                time.sleep(STOP_GRACE_S)
+                os._exit(3)
+            time.sleep(PARENT_POLL_S)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+def say_ready(out: TextIO, prefix: str, info: Any) -> None:
+    """The ready line launchers wait for: `prefix` then the info as one JSON object."""
+    data = asdict(info) if is_dataclass(info) and not isinstance(info, type) else info
+    out.write(prefix + json.dumps(data) + "\n")
+    out.flush()

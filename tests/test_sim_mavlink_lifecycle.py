@@ -1,0 +1,92 @@
+"""A sim-mavlink flight's processes and ports under signals, a killed controller and a leftover vehicle.
+
+`dronectl fly --vehicle sim-mavlink` starts the sim-vehicle as a child in its own session.
+Whatever ends the controller, that session must be gone shortly after, and a vehicle
+left over from elsewhere must never be flown. Ports 14940-14942 / 18940 (this file's).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from px4_helpers import wait_gone
+
+from flight.sim_process import SimVehicleOptions, SimVehicleProcess
+
+REPO = Path(__file__).resolve().parents[1]
+MISSION = REPO / "missions" / "regression" / "hil_sim_mavlink.yaml"
+PORT, HTTP = 14940, 18940
+
+pytestmark = pytest.mark.slow
+
+
+def _mission_file(tmp_path: Path) -> Path:
+    text = MISSION.read_text() + f"ports: {{mavlink_udp: {PORT}, http: {HTTP}}}\n"
+    path = tmp_path / "mission.yaml"
+    path.write_text(text)
+    return path
+
+
+def _fly(tmp_path: Path, out: Path) -> subprocess.Popen[str]:
+    command = [sys.executable, "-m", "tools.dronectl", "fly", "--mission", str(_mission_file(tmp_path)),
+               "--out", str(out)]  # fmt: skip
+    return subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _until_first_step(process: subprocess.Popen[str], out: Path) -> dict:
+    deadline = time.monotonic() + 90.0
+    while time.monotonic() < deadline:
+        try:
+            report = json.loads((out / "report.json").read_text())
+        except (OSError, ValueError):
+            report = {}
+        if report.get("steps"):
+            return report
+        assert process.poll() is None, process.communicate()[0]
+        time.sleep(0.1)
+    process.kill()
+    raise AssertionError("no first step within 90 s")
+
+
+def test_sigterm_lands_finishes_the_report_and_stops_the_sim_vehicle(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    process = _fly(tmp_path, out)
+    report = _until_first_step(process, out)
+    process.send_signal(signal.SIGTERM)
+    output = process.communicate(timeout=60)[0]
+    assert process.returncode == 130, output
+    final = json.loads((out / "report.json").read_text())
+    assert final["status"] == "finished" and "stopped by SIGTERM" in final["error"]
+    assert not wait_gone(report["setup"]["simulator_pid"], within_s=5.0)
+
+
+def test_a_controller_killed_outright_takes_its_sim_vehicle_with_it_within_2_s(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    process = _fly(tmp_path, out)
+    report = _until_first_step(process, out)
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait(10)
+    killed = time.monotonic()
+    left = wait_gone(report["setup"]["simulator_pid"], within_s=2.0 + 1.0)
+    assert not left, f"still running {time.monotonic() - killed:.1f} s after the controller died: {left}"
+
+
+def test_a_leftover_vehicle_on_the_ports_is_never_flown(tmp_path: Path) -> None:
+    # A vehicle from an earlier run still holds the mission's port and sends where the mission listens.
+    leftover = SimVehicleOptions(local_port=PORT, remote_port=PORT + 1, boot_delay_s=0.0)
+    with SimVehicleProcess(leftover) as old:
+        out = tmp_path / "run"
+        process = _fly(tmp_path, out)
+        output = process.communicate(timeout=120)[0]
+        assert process.returncode == 1, output
+        report = json.loads((out / "report.json").read_text())
+        assert report["passed"] is False
+        assert str(PORT) in report["error"]  # the port the new vehicle could not take is named
+        assert old.alive  # the leftover was left alone (and never armed: nobody connected to it)
