@@ -17,6 +17,7 @@ per step (everything but the move).
 
 from __future__ import annotations
 
+import json
 import logging
 import statistics
 import tempfile
@@ -33,8 +34,9 @@ from tqdm import tqdm
 from controller.flight_kit import LoadedModels
 from controller.mission_schema import PX4_SITL, SIM, SIM_MAVLINK, Mission, PortSpec, parse_mission
 from controller.missions import MissionResult
-from controller.report import claim_report_dir
+from controller.report import REPORT_JSON, claim_report_dir
 from controller.suite import UDP_PORTS_PER_MISSION, failed_to_start
+from flight.safety import SafetyLimits
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +68,8 @@ class BenchmarkConfig:
     px4_dir: str | None = None
     """PX4 SITL build folder for `px4-sitl` (None: $PX4_SITL_DIR)."""
     px4_speed: float | str = "max"
+    faults: dict[str, Any] | None = None
+    """Injected faults, the `faults:` section of a mission file (seeded per mission by its scene seed)."""
 
     def __post_init__(self) -> None:
         if self.n < 1 or self.parallel < 1:
@@ -115,6 +119,7 @@ def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozen
                 ).model_dump(),
                 **({"px4": {"dir": config.px4_dir, "speed": config.px4_speed, "keep_ulog": False}}
                    if config.vehicle == PX4_SITL else {}),
+                **({"faults": {**config.faults, "seed": seed}} if config.faults else {}),
             })
         )  # fmt: skip
     return missions
@@ -176,7 +181,18 @@ def run_benchmark(
                 futures = [pool.submit(_fly, m, p) for m, p in runs]
                 results = [f.result() for f in tqdm(futures, desc="missions", unit="mission")]
         wall_s = time.perf_counter() - started
-    return summarise(config, results, wall_s)
+        summary = summarise(config, results, wall_s)
+        summary["limits"]["reports_incomplete"] = [m.name for m, path in runs if not _report_complete(path)]
+    return summary
+
+
+def _report_complete(folder: Path) -> bool:
+    """A report.json that says how the mission ended (finished, or failed to start and why)."""
+    try:
+        report = json.loads((folder / REPORT_JSON).read_text())
+    except (OSError, ValueError):
+        return False
+    return report.get("status") in ("finished", "failed_to_start") and "outcome" in report
 
 
 def _by_index(results: list[MissionResult], planner: str) -> dict[str, MissionResult]:
@@ -218,6 +234,7 @@ def summarise(config: BenchmarkConfig, results: list[MissionResult], wall_s: flo
         "planners": planners,
         "missions": [r.to_json() for r in results],
     }
+    summary["limits"] = limits_summary(results)
     ready = [
         r.vehicle_clock_s["ready_s"] - r.info["px4_clock_offset_s"]
         for r in results
@@ -230,6 +247,49 @@ def summarise(config: BenchmarkConfig, results: list[MissionResult], wall_s: flo
             "n": len(ready),
         }
     return summary
+
+
+LOOP_TIMEOUT_SLACK_S = 10.0
+"""The loop checks its timeout between steps: a run may end one move and one settle past it."""
+
+
+def limits_summary(
+    results: list[MissionResult], limits: SafetyLimits | None = None, timeout_s: float = 120.0
+) -> dict[str, Any]:
+    """Per simulator truth: missions over the speed limit or outside the geofence; the longest run; reports.
+
+    The limits are `SafetyLimits`' defaults (what the missions fly under); the geofence box is
+    around home, where the vehicle armed. Only simulated MAVLink vehicles report truth extremes.
+    """
+    limits = limits or SafetyLimits()
+    fence = limits.geofence
+    judged = [r for r in results if r.truth_extremes]
+    too_fast = [
+        r.name
+        for r in judged
+        if r.truth_extremes["max_horizontal_speed_m_s"] > limits.max_horizontal_speed_m_s
+    ]
+    outside = []
+    if fence is not None:
+        for r in judged:
+            low, high = r.truth_extremes["min_ned_m"], r.truth_extremes["max_ned_m"]
+            if (
+                max(-low[0], high[0]) > fence.half_width_north_m
+                or max(-low[1], high[1]) > fence.half_width_east_m
+                or -low[2] > fence.max_up_m
+            ):
+                outside.append(r.name)
+    return {
+        "judged_by_truth": len(judged),
+        "max_horizontal_speed_m_s": max(
+            (r.truth_extremes["max_horizontal_speed_m_s"] for r in judged), default=None
+        ),
+        "over_speed_limit": too_fast,
+        "outside_geofence": outside,
+        "longest_run_wall_s": round(max((r.wall_s for r in results), default=0.0), 1),
+        "over_timeout": [r.name for r in results if r.vehicle_s > timeout_s + LOOP_TIMEOUT_SLACK_S],
+        "reports_incomplete": [],  # filled in by run_benchmark, which still has the folders
+    }
 
 
 def format_summary(summary: dict[str, Any]) -> str:
@@ -249,6 +309,18 @@ def format_summary(summary: dict[str, Any]) -> str:
         lines.append(
             f"PX4 estimator ready (as seen by MAVSDK) {r['mean']:.1f} s simulated on average, "
             f"{r['max']:.1f} s at most ({r['n']} missions)"
+        )
+    if cfg.get("faults"):
+        lines.append(f"injected faults: {cfg['faults']}")
+    limits = summary.get("limits")
+    if limits and limits["judged_by_truth"]:
+        n = {key: len(limits[key]) for key in ("over_speed_limit", "outside_geofence", "over_timeout")}
+        lines.append(
+            f"per truth ({limits['judged_by_truth']} missions): fastest "
+            f"{limits['max_horizontal_speed_m_s']:.2f} m/s, {n['over_speed_limit']} over the speed limit, "
+            f"{n['outside_geofence']} outside the geofence; longest run {limits['longest_run_wall_s']:.0f} s "
+            f"wall, {n['over_timeout']} over the timeout, "
+            f"{len(limits['reports_incomplete'])} reports incomplete"
         )
     lines.append(
         f"{'planner':<8} {'success':>15} {'mean steps':>10} {'/oracle':>8} {'offset px mean/p95/max':>23} "

@@ -67,6 +67,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from enum import Enum
 
+import numpy as np
+
 from controller.actions import Action, XMove, ZMove
 from controller.planners import Observation, Planner
 from flight.moves import MoveResult, execute_move
@@ -75,6 +77,7 @@ from flight.vehicle import Vehicle
 from perception.camera import Camera
 from perception.centring import REFERENCE_WIDTH_PX, is_centred, offset_px
 from perception.detector import Detector
+from perception.errors import CameraFrozenError
 from perception.types import Detection, Frame
 
 log = logging.getLogger(__name__)
@@ -267,6 +270,7 @@ class _RunState:
     rereads: int = 0
     recoveries: int = 0
     last_move: tuple[Action, tuple[float, float]] | None = None
+    before_move: np.ndarray | None = None  # the picture the last move was planned on
 
 
 @dataclass
@@ -288,7 +292,7 @@ class CentringLoop:
         state = _RunState(MoveSchedule(first_length_m, cfg.min_move_m, cfg.shrink), self.vehicle.time_s())
         while True:
             t0 = time.perf_counter()
-            record = self._observe(len(self.steps))
+            record = self._observe_fresh(len(self.steps), state)
             outcome: Outcome | None = None
             if record.detection is None:
                 outcome = self._on_lost(record, state)
@@ -342,6 +346,7 @@ class CentringLoop:
         state.stalls = 0
         record.move_m = (move[0], move[1])
         record.move = self._fly(*record.move_m)
+        state.before_move = record.frame.image
         moved = Action(XMove(_sign(move[0]) + 1), ZMove(1 - _sign(move[1])))
         state.last_move = (moved, record.move_m)
         return None
@@ -407,6 +412,30 @@ class CentringLoop:
             state.last_move, state.rereads = None, 0
             return None
         return Outcome.TARGET_LOST
+
+    def _observe_fresh(self, index: int, state: _RunState) -> StepRecord:
+        """`_observe`, refusing a frozen camera: after a move the picture must change.
+
+        A stuck encoder keeps sending the last picture with new frame numbers; planning on it
+        would repeat the same move again and again. A bit-identical picture after a move is
+        re-read for up to `frame_timeout_s` (a short freeze passes), then `CameraFrozenError`.
+        """
+        record = self._observe(index)
+        before, state.before_move = state.before_move, None
+        if before is None or not np.array_equal(record.frame.image, before):
+            return record
+        cfg = self.config
+        deadline = self.vehicle.time_s() + cfg.frame_timeout_s
+        log.warning("camera picture unchanged after a move: waiting for a fresh one")
+        while self.vehicle.time_s() < deadline:
+            self.vehicle.sleep(cfg.settle_s)
+            record = self._observe(index)
+            if not np.array_equal(record.frame.image, before):
+                return record
+        raise CameraFrozenError(
+            getattr(self.camera, "name", "camera"),
+            f"the picture has not changed for {cfg.frame_timeout_s:g} s after a move: the stream is frozen",
+        )
 
     def _observe(self, index: int) -> StepRecord:
         t0 = time.perf_counter()

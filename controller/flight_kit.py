@@ -39,6 +39,8 @@ class FlightKit:
     info: dict[str, Any] = field(default_factory=dict)
     """What the report should say about the setup (scene seed, target kind, start offset, URLs)."""
     tlog_path: Path | None = None
+    truth_extremes: Callable[[], dict[str, Any] | None] | None = None
+    """Judging only: the simulator's largest speeds and excursions from home over the flight."""
     image_width_px: int | None = None
     """The image width, where the kit knows it: ε against the stopping margin is checked before takeoff."""
 

@@ -29,7 +29,7 @@ from typing import Any
 
 from controller.flight_kit import FlightKit, LoadedModels, models_detector, models_planner
 from controller.mission_schema import Mission, StartOffset
-from controller.missions import scene_config_for, start_offset_for, wind_config_for
+from controller.missions import link_faults_for, scene_config_for, start_offset_for, wind_config_for
 from controller.planners import make_planner
 from controller.tlog_proxy import MavlinkTlogProxy
 from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
@@ -38,6 +38,7 @@ from perception.centring import default_epsilon_px
 from perception.detector import Detector
 from perception.stream_camera import StreamCamera
 from sim_world.mavlink.config import SimVehicleConfig
+from sim_world.mavlink.video import VideoFaults
 from sim_world.scene_config import SceneConfig
 from sim_world.scene_sampling import sample_scene
 from sim_world.sim_vehicle_main import READY_PREFIX as SIM_READY_PREFIX
@@ -88,6 +89,14 @@ class SimTruth:
             return None
         return (float(target["offset_px"][0]), float(target["offset_px"][1])) if target["in_view"] else None
 
+    def extremes(self) -> dict[str, Any] | None:
+        """The largest speeds and excursions from home seen in any frame so far (None if unreachable)."""
+        try:
+            return _get_json(self.url)["truth"].get("extremes")
+        except (OSError, ValueError, KeyError) as exc:
+            log.warning("no truth extremes from %s: %s", self.url, exc)
+            return None
+
     def ground_height_m(self) -> float:
         return float(_get_json(self.url)["truth"]["drone"]["position_enu_m"][2])
 
@@ -110,7 +119,15 @@ def sim_vehicle_run(mission: Mission, start: StartOffset, system_id: int) -> Sim
         start_offset=offset,
         image_size_px=SIM_IMAGE_PX,
         wind=wind_config_for(mission),
+        video_faults=video_faults_for(mission),
+        dies_at_s=mission.faults.vehicle_dies_at_s,
     )
+
+
+def video_faults_for(mission: Mission) -> VideoFaults | None:
+    """The mission's camera faults, for a simulated vehicle's video."""
+    spec = mission.faults.camera
+    return None if spec is None else VideoFaults(**spec.model_dump(), seed=mission.faults.seed)
 
 
 def new_system_id() -> int:
@@ -130,7 +147,9 @@ def open_sim_mavlink_kit(
     run = sim_vehicle_run(mission, start, system_id)
     with ExitStack() as stack:
         # The relay takes the vehicle's remote port first: a port in use fails before anything starts.
-        tlog = stack.enter_context(MavlinkTlogProxy(p + 1, p + 2, out_dir / TLOG_NAME))
+        tlog = stack.enter_context(
+            MavlinkTlogProxy(p + 1, p + 2, out_dir / TLOG_NAME, faults=link_faults_for(mission))
+        )
         sim = stack.enter_context(
             SimulatorProcess(
                 "sim_world.mavlink", run_to_json(run), out_dir / "sim_vehicle.log", SIM_READY_PREFIX,
@@ -186,6 +205,7 @@ def simulated_mavlink_kit(
         epsilon_px=mission.epsilon_px or default_epsilon_px(SIM_IMAGE_PX),
         instruction=mission.instruction_text(target.kind),
         truth_probe=truth.offset_px,
+        truth_extremes=truth.extremes,
         takeoff_altitude_m=climb_m,
         info={
             "scene_seed": mission.scene.seed,
@@ -213,7 +233,11 @@ def open_real_kit(mission: Mission, out_dir: Path, models: LoadedModels | None =
         if port is not None:
             # The relay takes the vehicle's port; MAVSDK listens behind it, REAL_CLIENT_PORT_SHIFT higher.
             relay = MavlinkTlogProxy(
-                port, port + REAL_CLIENT_PORT_SHIFT, out_dir / TLOG_NAME, listen_host="0.0.0.0"
+                port,
+                port + REAL_CLIENT_PORT_SHIFT,
+                out_dir / TLOG_NAME,
+                listen_host="0.0.0.0",
+                faults=link_faults_for(mission),
             )
             tlog = stack.enter_context(relay)
             url, tlog_path = f"udpin://127.0.0.1:{port + REAL_CLIENT_PORT_SHIFT}", tlog.path

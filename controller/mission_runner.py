@@ -168,6 +168,7 @@ def _finish(
         "wall_s": round(wall_s, 3),
         "vehicle_s": round(vehicle_s, 3),
         "vehicle_clock_s": {name: round(value, 3) for name, value in clock.items()},
+        "truth_extremes": kit.truth_extremes() if kit.truth_extremes is not None else None,
         "error": error,
     }
     final = writer.finish(summary, kit.tlog_path)
@@ -192,6 +193,7 @@ def _finish(
         refinement_moves=summary["refinement_moves"],
         vehicle_clock_s=summary["vehicle_clock_s"],
         files=final["files"],
+        truth_extremes=summary["truth_extremes"],
     )
 
 

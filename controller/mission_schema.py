@@ -234,6 +234,41 @@ class Px4Spec(_Strict):
         return value
 
 
+class LinkFaultSpec(_Strict):
+    """A bad MAVLink link between the controller and the vehicle (see `flight.link_faults`)."""
+
+    loss: float = Field(default=0.0, ge=0.0, lt=1.0)
+    latency_ms: float = Field(default=0.0, ge=0.0, le=5000.0)
+    jitter_ms: float = Field(default=0.0, ge=0.0, le=5000.0)
+    duplicate: float = Field(default=0.0, ge=0.0, lt=1.0)
+    reorder: float = Field(default=0.0, ge=0.0, lt=1.0)
+
+
+class CameraFaultSpec(_Strict):
+    """A bad camera at its source (`sim_world.mavlink.video.VideoFaults`); times: simulated s from boot."""
+
+    drop: float = Field(default=0.0, ge=0.0, lt=1.0)
+    freeze_at_s: float | None = Field(default=None, ge=0.0)
+    freeze_for_s: float = Field(default=3.0, gt=0.0)
+    dies_at_s: float | None = Field(default=None, ge=0.0)
+
+
+class FaultSpec(_Strict):
+    """Faults injected on purpose, to see how a mission degrades; all off by default."""
+
+    link: LinkFaultSpec | None = None
+    camera: CameraFaultSpec | None = None
+    gust_m_s: float = Field(default=0.0, ge=0.0, le=10.0)
+    """Gusts (the wind's standard deviation per axis, m/s) in a simulated world."""
+    vehicle_dies_at_s: float | None = Field(default=None, ge=0.0)
+    """The simulated vehicle (sim-vehicle, or PX4 itself) is killed at this simulated time from boot."""
+    seed: int = Field(default=0, ge=0)
+
+    @property
+    def any(self) -> bool:
+        return bool(self.link or self.camera or self.gust_m_s or self.vehicle_dies_at_s is not None)
+
+
 class Mission(_Strict):
     """One centring mission."""
 
@@ -264,6 +299,7 @@ class Mission(_Strict):
     expect: Expectations = Expectations()
     ports: PortSpec = PortSpec()
     px4: Px4Spec = Px4Spec()
+    faults: FaultSpec = FaultSpec()
 
     @model_validator(mode="after")
     def _links(self) -> Mission:
@@ -303,6 +339,17 @@ class Mission(_Strict):
             raise ValueError("detector: 'truth' is available in the in-process sim only (vehicle: sim)")
         if self.vehicle not in (SIM, PX4_SITL) and self.wind is not None:
             raise ValueError("wind: only the simulated worlds of 'sim' and 'px4-sitl' simulate wind")
+        mavlink_sim = self.vehicle in (SIM_MAVLINK, PX4_SITL)
+        if self.faults.link is not None and not (mavlink_sim or self.vehicle.startswith("udpin://")):
+            raise ValueError(
+                "faults.link: needs a relayed MAVLink link: sim-mavlink, px4-sitl or a udpin:// URL"
+            )
+        if (self.faults.camera is not None or self.faults.vehicle_dies_at_s is not None) and not mavlink_sim:
+            raise ValueError(
+                "faults: camera faults and a dying vehicle are simulated by sim-mavlink and px4-sitl only"
+            )
+        if self.faults.gust_m_s and self.is_real:
+            raise ValueError("faults.gust_m_s: only a simulated world has wind to make gusty")
         if self.vehicle != PX4_SITL and "px4" in self.model_fields_set:
             raise ValueError(f"px4: only a 'px4-sitl' mission runs PX4 SITL (vehicle is {self.vehicle!r})")
         if self.is_real and self.planner == "oracle":

@@ -9,12 +9,13 @@ detector's final offset.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from controller.centring_loop import Outcome, StepRecord
 from controller.mission_schema import Mission, MissionFileError, RandomStartSpec, StartOffset, load_mission
+from flight.link_faults import LinkFaults
 from sim_world.scene_config import DEFAULT_SCENE, SceneConfig, load_scene_config, parse_scene_config
 from sim_world.wind import WindConfig
 
@@ -44,6 +45,8 @@ class MissionResult:
     info: dict[str, Any] = field(default_factory=dict)
     vehicle_clock_s: dict[str, float] = field(default_factory=dict)
     files: dict[str, str | None] = field(default_factory=dict)
+    truth_extremes: dict[str, Any] | None = None
+    """Simulated MAVLink vehicles: the largest speeds and excursions from home per simulator truth."""
     """What the report folder holds: report, trajectory, gif, tlog (None: not written)."""
     """Milestones (connected, ready, offboard) on the vehicle's clock (PX4 SITL: its simulated time)."""
 
@@ -131,14 +134,22 @@ def scene_config_for(mission: Mission) -> SceneConfig:
 
 
 def wind_config_for(mission: Mission) -> WindConfig:
-    """The mission's wind for a simulated world (calm when it names none)."""
-    if mission.wind is None:
-        return WindConfig()
-    return WindConfig(
-        mean_enu_m_s=mission.wind.mean_enu_m_s,
-        gust_std_m_s=mission.wind.gust_std_m_s,
-        gust_time_constant_s=mission.wind.gust_time_constant_s,
-    )
+    """The mission's wind for a simulated world (calm when it names none); `faults.gust_m_s`: the gusts."""
+    wind = WindConfig()
+    if mission.wind is not None:
+        wind = WindConfig(
+            mean_enu_m_s=mission.wind.mean_enu_m_s,
+            gust_std_m_s=mission.wind.gust_std_m_s,
+            gust_time_constant_s=mission.wind.gust_time_constant_s,
+        )
+    if mission.faults.gust_m_s:
+        wind = replace(wind, gust_std_m_s=mission.faults.gust_m_s)
+    return wind
+
+
+def link_faults_for(mission: Mission) -> LinkFaults | None:
+    spec = mission.faults.link
+    return None if spec is None else LinkFaults(**spec.model_dump(), seed=mission.faults.seed)
 
 
 def start_offset_for(mission: Mission, hfov_deg: float, vfov_deg: float) -> StartOffset:

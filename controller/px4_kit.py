@@ -28,9 +28,10 @@ from controller.hil import (
     SimTruth,
     new_system_id,
     simulated_mavlink_kit,
+    video_faults_for,
 )
 from controller.mission_schema import Mission, StartOffset
-from controller.missions import scene_config_for, start_offset_for, wind_config_for
+from controller.missions import link_faults_for, scene_config_for, start_offset_for, wind_config_for
 from controller.tlog_proxy import MavlinkTlogProxy
 from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
 from flight.sim_launcher import SimulatorProcess
@@ -73,6 +74,8 @@ def px4_sim_config(mission: Mission, instance: int, out_dir: Path, system_id: in
         params=dict(spec.params),
         px4_log_dir=out_dir / "px4" if spec.keep_ulog else None,
         wind=wind_config_for(mission),
+        video_faults=video_faults_for(mission),
+        px4_dies_at_s=mission.faults.vehicle_dies_at_s,
     )
 
 
@@ -89,7 +92,12 @@ def open_px4_sitl_kit(
         mavsdk_port = MAVSDK_PORT_BASE + instance
         # The relay takes PX4's offboard port first: a port in use fails the run before PX4 starts.
         tlog = stack.enter_context(
-            MavlinkTlogProxy(OFFBOARD_PORT_BASE + instance, mavsdk_port, out_dir / TLOG_NAME)
+            MavlinkTlogProxy(
+                OFFBOARD_PORT_BASE + instance,
+                mavsdk_port,
+                out_dir / TLOG_NAME,
+                faults=link_faults_for(mission),
+            )
         )
         sim = stack.enter_context(
             SimulatorProcess(

@@ -26,7 +26,10 @@ from types import TracebackType
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from flight.link_faults import FaultyDelivery, LinkFaults
+
 log = logging.getLogger(__name__)
+
 
 _MAX_DATAGRAM = 65535
 _POLL_S = 0.05
@@ -36,7 +39,12 @@ class MavlinkTlogProxy:
     """Relay `vehicle → 127.0.0.1:listen_port → 127.0.0.1:client_port` and back, logging to `path`."""
 
     def __init__(
-        self, listen_port: int, client_port: int, path: str | Path, listen_host: str = "127.0.0.1"
+        self,
+        listen_port: int,
+        client_port: int,
+        path: str | Path,
+        listen_host: str = "127.0.0.1",
+        faults: LinkFaults | None = None,
     ) -> None:
         self.listen_port = listen_port
         self.client_port = client_port
@@ -53,6 +61,8 @@ class MavlinkTlogProxy:
             parser.robust_parsing = True
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self.faults = FaultyDelivery(faults) if faults is not None and faults.active else None
+        """A bad link on purpose (`flight.link_faults`): every datagram, both ways, goes through it."""
 
     def start(self) -> MavlinkTlogProxy:
         """Bind the vehicle-side port (raises OSError naming it if taken) and start relaying."""
@@ -81,8 +91,14 @@ class MavlinkTlogProxy:
         selector.register(self._client_sock, selectors.EVENT_READ, "client")
         try:
             while not self._stop.is_set():
-                for key, _ in selector.select(_POLL_S):
+                timeout = _POLL_S
+                if self.faults is not None and (at := self.faults.next_due_s()) is not None:
+                    timeout = min(timeout, max(0.0, at - time.monotonic()))
+                for key, _ in selector.select(timeout):
                     self._relay(key.data)
+                if self.faults is not None:
+                    for side, data in self.faults.due(time.monotonic()):
+                        self._send(side, data)
         except OSError as exc:
             if not self._stop.is_set():
                 log.error("tlog proxy stopped: %s", exc)
@@ -91,24 +107,44 @@ class MavlinkTlogProxy:
 
     def _relay(self, side: str) -> None:
         assert self._vehicle_sock is not None and self._client_sock is not None
-        if side == "vehicle":
-            data, address = self._vehicle_sock.recvfrom(_MAX_DATAGRAM)
+        sock = self._vehicle_sock if side == "vehicle" else self._client_sock
+        data, address = sock.recvfrom(_MAX_DATAGRAM)
+        if side == "vehicle" and self.vehicle_address != address:
+            if not self._speaks_mavlink(data):
+                return  # not MAVLink: never let it become the vehicle's address
             self.vehicle_address = address
+        if self.faults is not None:
+            self.faults.submit(time.monotonic(), (side, data))
+        else:
+            self._send(side, data)
+
+    def _send(self, side: str, data: bytes) -> None:
+        """Forward one datagram and log what crossed (after any injected fault: what the other side got)."""
+        assert self._vehicle_sock is not None and self._client_sock is not None
+        if side == "vehicle":
             self._client_sock.sendto(data, (self.client_host, self.client_port))
         else:
-            data, _ = self._client_sock.recvfrom(_MAX_DATAGRAM)
             if self.vehicle_address is None:
                 return  # nothing heard from the vehicle yet: nowhere to send
             self._vehicle_sock.sendto(data, self.vehicle_address)
         self._log(side, data)
 
+    @staticmethod
+    def _speaks_mavlink(data: bytes) -> bool:
+        """A datagram holding at least one whole MAVLink message of a known id (so CRC-checked)."""
+        parser = mavlink.MAVLink(None)
+        parser.robust_parsing = True
+        try:
+            messages = parser.parse_buffer(data) or []
+        except Exception:  # a parser that chokes: not MAVLink we know
+            return False
+        return any(not isinstance(m, (mavlink.MAVLink_bad_data, mavlink.MAVLink_unknown)) for m in messages)
+
     def _log(self, side: str, data: bytes) -> None:
         stamp = struct.pack(">Q", int(time.time() * 1e6))
         try:
             messages = self._parsers[side].parse_buffer(data) or []
-        except (
-            Exception
-        ) as exc:  # relayed anyway: a datagram the parser chokes on is only left out of the log
+        except Exception as exc:  # relayed anyway: a datagram the parser chokes on is left out of the log
             log.warning("tlog proxy: %s datagram not logged (%s: %s)", side, type(exc).__name__, exc)
             return
         assert self._file is not None

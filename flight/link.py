@@ -1,8 +1,10 @@
 """`LinkMonitor`: decides when a vehicle has stopped answering.
 
-Two signals, whichever comes first: no telemetry message for `timeout_s`
-(freshness: PX4 streams attitude at ~90 Hz, so silence is unambiguous), or
-MAVSDK's connection state going false (~3 s after the last heartbeat).
+Two signals: no telemetry message for `timeout_s` (freshness: PX4 streams attitude
+at ~90 Hz, so silence is unambiguous), or MAVSDK's connection state going false (~3 s
+after the last heartbeat) while telemetry is also quiet for `quiet_s`. A lossy radio
+can lose three heartbeats in a row (at 20 % loss, about once a minute) while attitude
+and position keep arriving: that link is alive, and is not declared lost.
 Getters in MAVSDK keep returning stale values after a link dies, and commands
 that are only enqueued (setpoints) still "succeed", so without this check a
 controller would fly blind.
@@ -20,10 +22,13 @@ from flight.errors import LinkLostError
 class LinkMonitor:
     """Thread-safe: `heard()` and `set_connected()` come from MAVSDK's callback thread."""
 
-    def __init__(self, timeout_s: float, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self, timeout_s: float, clock: Callable[[], float] = time.monotonic, quiet_s: float = 0.5
+    ) -> None:
         if not timeout_s > 0:
             raise ValueError(f"link timeout must be > 0, got {timeout_s!r}")
         self.timeout_s = timeout_s
+        self.quiet_s = min(quiet_s, timeout_s)
         self._clock = clock
         self._lock = threading.Lock()
         self._last_heard_s = clock()
@@ -50,5 +55,5 @@ class LinkMonitor:
         with self._lock:
             silent_s = self._clock() - self._last_heard_s
             connected = self._connected
-        if silent_s > self.timeout_s or not connected:
+        if silent_s > self.timeout_s or (not connected and silent_s > self.quiet_s):
             raise LinkLostError(origin, silent_s, self.timeout_s)

@@ -41,6 +41,7 @@ from mavsdk.plugins.telemetry import Telemetry as MavsdkTelemetry
 
 from flight.errors import (
     CommandDeniedError,
+    FlightTimeoutError,
     ModeChangeError,
     OffboardInterruptedError,
     VehicleConnectionError,
@@ -56,6 +57,7 @@ log = logging.getLogger(__name__)
 _RETRY_ARM = {ActionResult.COMMAND_DENIED, ActionResult.BUSY, ActionResult.TIMEOUT, ActionResult.FAILED}
 _NAN3 = (math.nan, math.nan, math.nan)
 READY_REPORT_EVERY_S = 5.0
+DISARM_RACE_WAIT_S = 3.0
 
 
 @dataclass(frozen=True)
@@ -82,6 +84,29 @@ class MavsdkConfig:
             raise ValueError(f"MavsdkConfig.expected_system_id must be 1..255, got {self.expected_system_id}")
         if not (self.link_timeout_s > 0 and self.arm_retry_period_s > 0 and self.poll_s > 0):
             raise ValueError("MavsdkConfig: link_timeout_s, arm_retry_period_s and poll_s must be > 0")
+
+
+COMMAND_ATTEMPTS = 3
+
+
+def _resend_on_timeout(call: Callable[[], Any], attempts: int = COMMAND_ATTEMPTS) -> Any:
+    """Run a MAVSDK command, sending it again when it timed out (every ack lost on a lossy link).
+
+    MAVSDK already resends a command four times, 0.5 s apart, before TIMEOUT; on a radio that
+    loses a fifth of the packets each way that still fails about once in 170 commands. These
+    commands (takeoff, hold, land, disarm, offboard start/stop) are idempotent on PX4, so sending
+    them again is safe. Any other result is raised at once.
+    """
+    for attempt in range(1, attempts + 1):
+        try:
+            return call()
+        except (ActionError, OffboardError) as exc:
+            if exc.result.name != "TIMEOUT" or attempt == attempts:
+                raise
+            log.warning(
+                "%s timed out (no ack): sending it again (%d of %d)", exc.origin, attempt + 1, attempts
+            )
+    return None
 
 
 def _route_mavsdk_logs() -> None:
@@ -350,8 +375,8 @@ class MavsdkVehicle(Vehicle):
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise ValueError(f"takeoff altitude must be a positive number of metres, got {altitude_m!r}")
         try:
-            action.set_takeoff_altitude(altitude_m)
-            action.takeoff()
+            _resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m))
+            _resend_on_timeout(action.takeoff)
         except ActionError as exc:
             armed = self.telemetry().armed
             detail = self._last_text() or ("the vehicle is not armed" if not armed else "")
@@ -399,7 +424,7 @@ class MavsdkVehicle(Vehicle):
                 "set a velocity setpoint first: PX4 needs a setpoint stream",
             )
         try:
-            offboard.start()
+            _resend_on_timeout(offboard.start)
         except OffboardError as exc:
             raise CommandDeniedError("start_offboard()", exc.result.name, self._last_text()) from None
         self._confirm_mode(FlightMode.OFFBOARD, timeout_s, "start_offboard()")
@@ -414,7 +439,7 @@ class MavsdkVehicle(Vehicle):
         self._in_offboard = False
         action = self._require(self._action, "hold()")
         try:
-            action.hold()
+            _resend_on_timeout(action.hold)
         except ActionError as exc:
             raise CommandDeniedError("hold()", exc.result.name, self._last_text()) from None
         self._confirm_mode(FlightMode.HOLD, None, "hold()")
@@ -425,7 +450,7 @@ class MavsdkVehicle(Vehicle):
         if self.telemetry().flight_mode != FlightMode.OFFBOARD:
             return
         try:
-            offboard.stop()
+            _resend_on_timeout(offboard.stop)
         except OffboardError as exc:
             raise CommandDeniedError("stop_offboard()", exc.result.name, self._last_text()) from None
         self._confirm_mode(FlightMode.HOLD, timeout_s, "stop_offboard()")
@@ -436,7 +461,7 @@ class MavsdkVehicle(Vehicle):
             self.stop_offboard()
         self._in_offboard = False
         try:
-            action.land()
+            _resend_on_timeout(action.land)
         except ActionError as exc:
             raise CommandDeniedError("land()", exc.result.name, self._last_text()) from None
         self._wait(lambda t: not t.in_air, timeout_s or self.config.timeouts.land_s, "land()", "landed state")
@@ -446,9 +471,13 @@ class MavsdkVehicle(Vehicle):
         if not self.telemetry().armed:
             return
         try:
-            action.disarm()
+            _resend_on_timeout(action.disarm)
         except ActionError as exc:
-            if self.telemetry().armed:  # else PX4's auto-disarm won the race: that is success
+            # PX4's auto-disarm may have won the race (its ack lost, or telemetry a heartbeat late):
+            # that is success, so give telemetry a moment to say so before calling it a failure.
+            try:
+                self._wait(lambda t: not t.armed, DISARM_RACE_WAIT_S, "disarm()", "disarmed state")
+            except FlightTimeoutError:
                 raise CommandDeniedError("disarm()", exc.result.name, self._last_text()) from None
         self._wait(
             lambda t: not t.armed, timeout_s or self.config.timeouts.disarm_s, "disarm()", "disarmed state"

@@ -42,6 +42,7 @@ def execute_move(
     settle_speed_m_s: float = 0.1,
     settle_timeout_s: float = 5.0,
     command_period_s: float = 0.1,
+    unseen_motion_wait_s: float = 1.0,
 ) -> MoveResult:
     """Command `velocity` for `duration_s` (vehicle clock), then hold until speed < `settle_speed_m_s`.
 
@@ -50,6 +51,13 @@ def execute_move(
     Not settling within `settle_timeout_s` is reported in the result (`settled`),
     not raised: the vehicle is holding either way, and the caller re-observes.
     Requires the vehicle to be in offboard.
+
+    "Settled" needs telemetry that has seen the move: over a link with latency, the first
+    samples after the stop still show the vehicle at rest *before* the move, and a
+    controller that re-observed then would see the old picture and repeat the move. So
+    a (non-zero) move settles only after telemetry showed it faster than
+    `settle_speed_m_s` at least once, or, if it never does (a move lost on the link, one
+    too short to show), after `unseen_motion_wait_s`.
     """
     if not (math.isfinite(duration_s) and duration_s >= 0.0):
         raise ValueError(f"duration_s must be a finite number >= 0, got {duration_s!r}")
@@ -59,9 +67,11 @@ def execute_move(
     start = vehicle.telemetry()
     end_time_s = vehicle.time_s() + duration_s
     vehicle.set_velocity_body(velocity)
+    seen_moving = velocity.is_zero() or duration_s == 0.0
     # A simulated clock advances in whole physics steps: stop within a millisecond of the end.
     while (remaining_s := end_time_s - vehicle.time_s()) > _CLOCK_SLACK_S:
         vehicle.sleep(min(command_period_s, remaining_s))
+        seen_moving = seen_moving or vehicle.telemetry().velocity_ned.speed_m_s >= settle_speed_m_s
         if end_time_s - vehicle.time_s() > _CLOCK_SLACK_S:
             vehicle.set_velocity_body(velocity)
     vehicle.hold()
@@ -70,7 +80,10 @@ def execute_move(
     settled = False
     while vehicle.time_s() - settle_start_s < settle_timeout_s:
         vehicle.sleep(command_period_s)
-        if vehicle.telemetry().velocity_ned.speed_m_s < settle_speed_m_s:
+        speed = vehicle.telemetry().velocity_ned.speed_m_s
+        if speed >= settle_speed_m_s:
+            seen_moving = True
+        elif seen_moving or vehicle.time_s() - settle_start_s >= unseen_motion_wait_s:
             settled = True
             break
     settle_time_s = vehicle.time_s() - settle_start_s

@@ -36,6 +36,10 @@ class CameraStreamEndedError(CameraError):
     """The stream ended or dropped (server closed the connection, end of a video file)."""
 
 
+class CameraFrozenError(CameraError):
+    """New frames keep arriving with the very same picture, though the vehicle moved (a stuck encoder)."""
+
+
 class CameraClosedError(CameraError):
     """`read()` was called on a camera after `close()`."""
 

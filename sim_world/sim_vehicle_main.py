@@ -10,6 +10,8 @@ A hovering start is not offered: PX4 boots on the ground, so must the sim.
 from __future__ import annotations
 
 import logging
+import os
+import signal
 import threading
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
@@ -19,7 +21,7 @@ from sim_world.camera import CameraConfig
 from sim_world.mavlink.commander import CommanderConfig
 from sim_world.mavlink.config import SimVehicleConfig
 from sim_world.mavlink.params import PX4_PARAMS
-from sim_world.mavlink.video import VideoConfig, VideoError, WorldVideoFeed
+from sim_world.mavlink.video import VideoConfig, VideoError, VideoFaults, WorldVideoFeed
 from sim_world.mavlink.world_model import WorldVehicleModel
 from sim_world.mavlink_vehicle import LoopStats, SimVehicle, SimVehicleError
 from sim_world.process_entry import say_ready, stop_on_signals
@@ -70,6 +72,9 @@ class SimVehicleRun:
     duration_s: float | None = None  # None: until stopped
     status_every_s: float = 0.0  # log the loop statistics this often (0: never)
     wind: WindConfig = field(default_factory=WindConfig)
+    video_faults: VideoFaults | None = None
+    dies_at_s: float | None = None
+    """An injected fault: the vehicle process kills itself (SIGKILL) at this simulated time."""
 
 
 @dataclass(frozen=True)
@@ -119,7 +124,10 @@ def run_sim_vehicle(
                 world,
                 model.origin_enu_m,
                 VideoConfig(
-                    vehicle_config.video_host, vehicle_config.http_video_port, vehicle_config.video_fps
+                    vehicle_config.video_host,
+                    vehicle_config.http_video_port,
+                    vehicle_config.video_fps,
+                    faults=run.video_faults,
                 ),
             )
         with SimVehicle(model, vehicle_config, video=video) as vehicle:
@@ -127,9 +135,16 @@ def run_sim_vehicle(
                 on_ready(vehicle)
             waited = 0.0
             period = run.status_every_s if run.status_every_s > 0 else 0.5
+            if run.dies_at_s is not None:
+                period = min(period, 0.05)
             while not stop.is_set() and vehicle.running:
                 if run.duration_s is not None and waited >= run.duration_s:
                     break
+                if run.dies_at_s is not None and vehicle.stats().sim_s >= run.dies_at_s:
+                    log.warning(
+                        "sim-vehicle: dying at %.1f s of simulated time (injected fault)", run.dies_at_s
+                    )
+                    os.kill(os.getpid(), signal.SIGKILL)  # no goodbye on the link, as a crash
                 step = period if run.duration_s is None else min(period, run.duration_s - waited)
                 stop.wait(step)
                 waited += step
@@ -204,6 +219,8 @@ def run_to_json(run: SimVehicleRun) -> dict[str, Any]:
         "duration_s": run.duration_s,
         "status_every_s": run.status_every_s,
         "wind": asdict(run.wind),
+        "video_faults": None if run.video_faults is None else asdict(run.video_faults),
+        "dies_at_s": run.dies_at_s,
     }  # fmt: skip
 
 
@@ -221,4 +238,6 @@ def run_from_json(data: dict[str, Any]) -> SimVehicleRun:
         duration_s=data["duration_s"],
         status_every_s=float(data["status_every_s"]),
         wind=WindConfig(**wind),
+        video_faults=None if data.get("video_faults") is None else VideoFaults(**data["video_faults"]),
+        dies_at_s=data.get("dies_at_s"),
     )

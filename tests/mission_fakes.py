@@ -111,7 +111,7 @@ class FakeVehicle(Vehicle):
 
 
 class FakeCamera(Camera):
-    """Blank RGB frames, numbered."""
+    """Blank RGB frames, numbered; each differs in one pixel (a real camera's pictures never repeat)."""
 
     def __init__(self, size: int = IMAGE_SIZE) -> None:
         self.size = size
@@ -119,7 +119,9 @@ class FakeCamera(Camera):
         self.closed = False
 
     def read(self, timeout_s: float | None = None) -> Frame:
-        frame = Frame(np.zeros((self.size, self.size, 3), np.uint8), float(self.count), self.count)
+        image = np.zeros((self.size, self.size, 3), np.uint8)
+        image.reshape(-1)[self.count % image.size] = 1 + self.count // image.size % 255
+        frame = Frame(image, float(self.count), self.count)
         self.count += 1
         return frame
 

@@ -68,9 +68,12 @@ def test_silence_longer_than_the_timeout_is_link_loss() -> None:
     assert info.value.silent_s == pytest.approx(2.1)
 
 
-def test_mavsdk_disconnect_is_link_loss_until_the_vehicle_is_heard_again() -> None:
-    link = LinkMonitor(2.0, FakeClock())
-    link.set_connected(False)
+def test_mavsdk_disconnect_is_link_loss_once_telemetry_is_quiet_too() -> None:
+    clock = FakeClock()
+    link = LinkMonitor(2.0, clock)
+    link.set_connected(False)  # three heartbeats lost in a row...
+    link.check("arm()")  # ...while attitude still arrives: a lossy link, alive
+    clock.now_s += 0.6  # and now nothing at all for 0.6 s: gone
     with pytest.raises(LinkLostError):
         link.check("arm()")
     link.heard()

@@ -180,3 +180,31 @@ def test_a_mission_that_cannot_start_still_writes_a_report_saying_why(tmp_path: 
     assert report["status"] == "failed_to_start" and report["passed"] is False
     assert str(info.value).split("\n")[0][:40] in report["error"]
     assert report["files"]["gif"] is None and not (out / "camera.gif").exists()
+
+
+class FreezingCamera(FakeCamera):
+    """From read `at_read` on, `frozen_reads` reads repeat that picture (new numbers, same pixels)."""
+
+    def __init__(self, at_read: int, frozen_reads: int) -> None:
+        super().__init__()
+        self.at_read, self.frozen_reads, self._held = at_read, frozen_reads, None
+
+    def read(self, timeout_s: float | None = None):
+        frame = super().read(timeout_s)
+        if self.at_read <= frame.frame_number < self.at_read + self.frozen_reads:
+            self._held = self._held if self._held is not None else frame.image
+            return type(frame)(self._held, frame.timestamp_s, frame.frame_number)
+        return frame
+
+
+def test_a_frozen_camera_ends_the_mission_and_lands_but_a_short_freeze_passes(tmp_path: Path) -> None:
+    vehicle = FakeVehicle(east_m=-1.0)
+    mission = parse_mission({"name": "frozen", "planner": "classic"})
+    camera = FreezingCamera(at_read=0, frozen_reads=10_000)  # stuck from the start
+    result = fly_kit(kit_for(vehicle, ClassicPlanner(), camera=camera), mission, tmp_path / "a", LIMITS)
+    assert result.outcome == "aborted" and "frozen" in (result.error or "")
+    assert "land" in vehicle.calls and not vehicle.in_air
+    vehicle = FakeVehicle(east_m=-1.0)
+    camera = FreezingCamera(at_read=1, frozen_reads=3)  # a few stuck frames after the first move
+    result = fly_kit(kit_for(vehicle, ClassicPlanner(), camera=camera), mission, tmp_path / "b", LIMITS)
+    assert result.outcome == "centred", result.error

@@ -90,3 +90,38 @@ def test_a_leftover_vehicle_on_the_ports_is_never_flown(tmp_path: Path) -> None:
         assert report["passed"] is False
         assert str(PORT) in report["error"]  # the port the new vehicle could not take is named
         assert old.alive  # the leftover was left alone (and never armed: nobody connected to it)
+
+
+def _faulty_mission(tmp_path: Path, faults: str) -> Path:
+    path = tmp_path / "faulty.yaml"
+    path.write_text(_mission_file(tmp_path).read_text() + f"faults: {faults}\n")
+    return path
+
+
+def test_a_vehicle_that_dies_mid_flight_ends_the_mission_with_a_complete_report(tmp_path: Path) -> None:
+    from controller.mission_runner import run_mission
+    from controller.mission_schema import load_mission
+
+    mission = load_mission(_faulty_mission(tmp_path, "{vehicle_dies_at_s: 5.0}"))
+    result = run_mission(mission, tmp_path / "run", media=False)
+    assert not result.passed and result.outcome == "aborted"
+    assert "LINK_LOST" in (result.error or "")
+    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    assert report["status"] == "finished" and report["error"] == result.error
+    assert not wait_gone(report["setup"]["simulator_pid"], within_s=5.0)
+
+
+def test_a_camera_that_dies_mid_flight_ends_the_mission_landed(tmp_path: Path) -> None:
+    from pymavlink import mavutil
+
+    from controller.mission_runner import run_mission
+    from controller.mission_schema import load_mission
+
+    mission = load_mission(_faulty_mission(tmp_path, "{camera: {dies_at_s: 5.0}}"))
+    result = run_mission(mission, tmp_path / "run", media=False)
+    assert not result.passed and "camera" in (result.error or "")
+    log = mavutil.mavlink_connection(str(tmp_path / "run" / "flight.tlog"))
+    landed = None
+    while (msg := log.recv_match(type="EXTENDED_SYS_STATE")) is not None:
+        landed = msg.landed_state
+    assert landed == mavutil.mavlink.MAV_LANDED_STATE_ON_GROUND  # held, then landed

@@ -16,10 +16,36 @@ import logging
 import sys
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from controller.benchmark_missions import BenchmarkConfig, format_summary, run_benchmark
+from controller.mission_schema import FaultSpec
 from controller.report import ReportFolderError
 from sim_world.px4_bridge.px4_process import Px4FolderError, find_px4_dir
+
+
+def faults_from_args(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The `faults:` mapping of a mission for the fault options given (None when none is)."""
+    link = {
+        "loss": args.link_loss, "latency_ms": args.link_latency_ms, "jitter_ms": args.link_jitter_ms,
+        "duplicate": args.link_duplicate, "reorder": args.link_reorder,
+    }  # fmt: skip
+    camera = {
+        "drop": args.frame_drop, "freeze_at_s": args.camera_freeze_at_s,
+        "freeze_for_s": args.camera_freeze_for_s, "dies_at_s": args.camera_dies_at_s,
+    }  # fmt: skip
+    faults: dict[str, Any] = {}
+    if any(link.values()):
+        faults["link"] = link
+    if camera["drop"] or camera["freeze_at_s"] is not None or camera["dies_at_s"] is not None:
+        faults["camera"] = camera
+    if args.gust_m_s:
+        faults["gust_m_s"] = args.gust_m_s
+    if args.vehicle_dies_at_s is not None:
+        faults["vehicle_dies_at_s"] = args.vehicle_dies_at_s
+    if faults:
+        FaultSpec.model_validate(faults)  # a bad value is named now, not in every mission
+    return faults or None
 
 
 def _speed(text: str) -> float | str:
@@ -63,6 +89,26 @@ def main(argv: list[str]) -> int:
     parser.add_argument(
         "--fixed-moves", action="store_true", help="the paper's fixed move lengths instead of scaled ones"
     )
+    faults = parser.add_argument_group("injected faults (sim-mavlink and px4-sitl; gusts also sim)")
+    faults.add_argument(
+        "--link-loss", type=float, default=0.0, help="fraction of MAVLink datagrams lost, each way"
+    )
+    faults.add_argument("--link-latency-ms", type=float, default=0.0, help="added one-way latency, ms")
+    faults.add_argument(
+        "--link-jitter-ms", type=float, default=0.0, help="± uniform jitter on that latency, ms"
+    )
+    faults.add_argument("--link-duplicate", type=float, default=0.0, help="fraction of datagrams sent twice")
+    faults.add_argument(
+        "--link-reorder", type=float, default=0.0, help="fraction held back behind later ones"
+    )
+    faults.add_argument("--frame-drop", type=float, default=0.0, help="fraction of camera frames never sent")
+    faults.add_argument("--camera-freeze-at-s", type=float, help="the picture freezes at this simulated time")
+    faults.add_argument("--camera-freeze-for-s", type=float, default=3.0, help="for this long (default 3 s)")
+    faults.add_argument("--camera-dies-at-s", type=float, help="the video stream dies at this simulated time")
+    faults.add_argument(
+        "--gust-m-s", type=float, default=0.0, help="wind gusts, standard deviation per axis, m/s"
+    )
+    faults.add_argument("--vehicle-dies-at-s", type=float, help="the vehicle (or PX4) is killed at this time")
     parser.add_argument("--parallel", type=int, default=1, help="worker processes (default: 1)")
     parser.add_argument("--json", type=Path, help="write the summary and every mission's row here")
     parser.add_argument(
@@ -76,7 +122,7 @@ def main(argv: list[str]) -> int:
             vehicle=args.vehicle, max_steps=args.max_steps, epsilon_px=args.epsilon_px,
             checkpoint=args.checkpoint, detector=args.detector, parallel=args.parallel,
             detector_checkpoint=args.detector_checkpoint, scale_moves=not args.fixed_moves,
-            px4_dir=args.px4, px4_speed=_speed(args.px4_speed),
+            px4_dir=args.px4, px4_speed=_speed(args.px4_speed), faults=faults_from_args(args),
         )  # fmt: skip
         if config.vehicle == "px4-sitl":  # a missing PX4 folder is named before anything flies
             config = replace(config, px4_dir=str(find_px4_dir(config.px4_dir)))

@@ -18,6 +18,7 @@ import logging
 import math
 import multiprocessing as mp
 import os
+import random
 import signal
 import time
 from dataclasses import dataclass
@@ -44,6 +45,58 @@ class VideoError(RuntimeError):
 
 
 @dataclass(frozen=True)
+class VideoFaults:
+    """A bad camera on purpose: dropped frames, a frozen picture, a stream that dies.
+
+    Times are simulated seconds since the vehicle started (a mission's loop typically
+    begins 10-20 s in, after readiness, arming and the takeoff). While frozen, the last
+    image is sent again and again (new frame numbers, the same picture, as a stuck encoder
+    does) while `/truth.json` keeps telling the truth. A dead stream closes the server.
+    """
+
+    drop: float = 0.0  # fraction of rendered frames never sent
+    freeze_at_s: float | None = None
+    freeze_for_s: float = 3.0
+    dies_at_s: float | None = None
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.drop < 1.0:
+            raise ValueError(f"VideoFaults.drop must be in [0, 1), got {self.drop}")
+        for name in ("freeze_at_s", "dies_at_s"):
+            value = getattr(self, name)
+            if value is not None and not value >= 0.0:
+                raise ValueError(f"VideoFaults.{name} must be >= 0 s, got {value}")
+        if not self.freeze_for_s > 0.0:
+            raise ValueError(f"VideoFaults.freeze_for_s must be > 0, got {self.freeze_for_s}")
+
+
+class TruthExtremes:
+    """The largest speeds and excursions from home over every frame's pose (judging only)."""
+
+    def __init__(self) -> None:
+        self.horizontal_speed_m_s = 0.0
+        self.vertical_speed_m_s = 0.0
+        self.low_ned_m = [0.0, 0.0, 0.0]
+        self.high_ned_m = [0.0, 0.0, 0.0]
+
+    def update(self, ned_m: list[float], velocity_ned_m_s: list[float]) -> None:
+        vn, ve, vd = velocity_ned_m_s
+        self.horizontal_speed_m_s = max(self.horizontal_speed_m_s, math.hypot(vn, ve))
+        self.vertical_speed_m_s = max(self.vertical_speed_m_s, abs(vd))
+        self.low_ned_m = [min(a, b) for a, b in zip(self.low_ned_m, ned_m, strict=True)]
+        self.high_ned_m = [max(a, b) for a, b in zip(self.high_ned_m, ned_m, strict=True)]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "max_horizontal_speed_m_s": round(self.horizontal_speed_m_s, 3),
+            "max_vertical_speed_m_s": round(self.vertical_speed_m_s, 3),
+            "min_ned_m": [round(v, 3) for v in self.low_ned_m],
+            "max_ned_m": [round(v, 3) for v in self.high_ned_m],
+        }
+
+
+@dataclass(frozen=True)
 class VideoConfig:
     host: str = "127.0.0.1"
     port: int = 8080
@@ -55,6 +108,7 @@ class VideoConfig:
     clock); "sim": render each `capture()` once, the caller capturing `fps` times per simulated
     second (the PX4 bridge, which may run faster or slower than real time)."""
     max_behind_s: float = 1.0  # "sim" clock: how long capture() waits for the previous frame
+    faults: VideoFaults | None = None
 
     def __post_init__(self) -> None:
         if self.clock not in ("wall", "sim"):
@@ -199,6 +253,10 @@ def _serve(
             # A vehicle killed outright never sets `stop` (and `daemon=True` only acts on a normal
             # exit): re-parenting means it is gone, so stop rather than render for nobody forever.
             sim_clock = config.clock == "sim"
+            faults = config.faults or VideoFaults()
+            rng = random.Random(faults.seed)
+            extremes = TruthExtremes()
+            frozen: np.ndarray | None = None
             while not stop.value and os.getppid() == parent:
                 if sim_clock:
                     if requested.value <= frames.value:  # nothing new to draw
@@ -212,7 +270,19 @@ def _serve(
                     world.drone.body_id, values[0:3], values[3:7], physicsClientId=world.client_id
                 )
                 render = world.render(with_seg=True)
-                server.publish(render.rgb, frame_truth(world, render, values, origin_enu_m))
+                truth = frame_truth(world, render, values, origin_enu_m)
+                extremes.update(truth["drone"]["position_ned_m"], truth["drone"]["velocity_ned_m_s"])
+                truth["extremes"] = extremes.as_dict()
+                sim_s = values[10]
+                if faults.dies_at_s is not None and sim_s >= faults.dies_at_s:
+                    log.warning("video: the stream dies at %.1f s (injected fault)", sim_s)
+                    break
+                image = render.rgb
+                if faults.freeze_at_s is not None and 0 <= sim_s - faults.freeze_at_s < faults.freeze_for_s:
+                    frozen = image if frozen is None else frozen
+                    image = frozen
+                if not (faults.drop and rng.random() < faults.drop):
+                    server.publish(image, truth)
                 render_s.value += time.monotonic() - t0
                 if sim_clock:
                     frames.value = frames_wanted  # (a capture that raced this frame is drawn next)

@@ -233,6 +233,12 @@ class Px4Process:
                 f"{self.output_tail()}"
             )
 
+    def kill(self) -> None:
+        """Stop PX4 dead (a crashed autopilot: no shutdown, the simulator link just drops)."""
+        if self._process is not None and self._process.poll() is None:
+            self._process.kill()
+            self._process.wait(5.0)
+
     def close(self, timeout_s: float = 5.0) -> None:
         process, self._process = self._process, None
         if process is not None and process.poll() is None:

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from sim_world.camera import CameraConfig
-from sim_world.mavlink.video import VideoConfig, VideoError, WorldVideoFeed
+from sim_world.mavlink.video import VideoConfig, VideoError, VideoFaults, WorldVideoFeed
 from sim_world.process_entry import say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
 from sim_world.px4_bridge.bridge import BridgeStats, BridgeTiming, CameraClock, Px4Bridge
@@ -72,6 +72,9 @@ class Px4SimConfig:
     connect_timeout_s: float = 60.0  # PX4 start to lockstep (a cold start here: ~1 s)
     duration_s: float | None = None  # of simulated time; None: until stopped
     wind: WindConfig = field(default_factory=WindConfig)
+    video_faults: VideoFaults | None = None
+    px4_dies_at_s: float | None = None
+    """An injected fault: PX4 is killed (SIGKILL) at this simulated time."""
 
     def __post_init__(self) -> None:
         if not 0 <= self.instance <= MAX_INSTANCE:
@@ -150,7 +153,11 @@ def run_px4_sim(
                     world,
                     origin,
                     VideoConfig(
-                        config.video_host, config.http_video_port, fps=config.timing.camera_fps, clock="sim"
+                        config.video_host,
+                        config.http_video_port,
+                        fps=config.timing.camera_fps,
+                        clock="sim",
+                        faults=config.video_faults,
                     ),
                 )
                 video.start()
@@ -191,6 +198,13 @@ def run_px4_sim(
                                 lockstep_after_s=world.time_s,
                             )
                         )
+                    if config.px4_dies_at_s is not None:
+                        bridge.run(stop, max_sim_s=max(0.0, config.px4_dies_at_s - world.time_s))
+                        if not stop.is_set():
+                            log.warning(
+                                "killing PX4 at %.1f s of simulated time (injected fault)", world.time_s
+                            )
+                            px4.kill()
                     remaining = (
                         None if config.duration_s is None else max(0.0, config.duration_s - world.time_s)
                     )
@@ -241,6 +255,8 @@ def config_to_json(config: Px4SimConfig) -> dict[str, Any]:
         "connect_timeout_s": config.connect_timeout_s,
         "duration_s": config.duration_s,
         "wind": asdict(config.wind),
+        "video_faults": None if config.video_faults is None else asdict(config.video_faults),
+        "px4_dies_at_s": config.px4_dies_at_s,
     }
 
 
@@ -265,6 +281,8 @@ def config_from_json(data: dict[str, Any]) -> Px4SimConfig:
         connect_timeout_s=float(data["connect_timeout_s"]),
         duration_s=data["duration_s"],
         wind=WindConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in data["wind"].items()}),
+        video_faults=None if data.get("video_faults") is None else VideoFaults(**data["video_faults"]),
+        px4_dies_at_s=data.get("px4_dies_at_s"),
     )
 
 
