@@ -44,7 +44,7 @@ from sim_world.sim_vehicle_main import StartOffset as SimStartOffset
 
 log = logging.getLogger(__name__)
 
-MAVSDK_PORT_BASE = 14640  # MAVSDK listens behind the relay on 14640+N
+MAVSDK_PORT_BASE = 15140  # MAVSDK listens behind the relay on 15140+N (clear of the tests' 146xx-149xx)
 VIDEO_PORT_BASE = 18900  # the bridge's MJPEG stream on 18900+N
 PX4_START_TIMEOUT_S = 90.0
 

@@ -382,15 +382,19 @@ class MavsdkVehicle(Vehicle):
             detail = self._last_text() or ("the vehicle is not armed" if not armed else "")
             raise CommandDeniedError(exc.origin, exc.result.name, detail) from None
         target_m = altitude_m - self.config.altitude_tolerance_m
+        # Done when PX4 says so (it leaves TAKEOFF for HOLD at the altitude), not merely when the
+        # climb is slow: a low takeoff (0.5 m) rises slowly all the way, and was taken for finished
+        # 0.3 m short of it.
         self._wait(
             lambda t: (
                 t.in_air
+                and t.flight_mode != FlightMode.TAKEOFF
                 and self._ground_down_m - t.position_ned.down_m >= target_m
                 and abs(t.velocity_ned.down_m_s) < self.config.climb_done_speed_m_s
             ),
             timeout_s or self.config.timeouts.takeoff_s,
             "takeoff()",
-            f"in-air state, altitude {target_m:.2f} m and the climb ending",
+            f"in-air state, altitude {target_m:.2f} m, the takeoff mode left and the climb ending",
         )
 
     def set_velocity_body(self, velocity: VelocityBody) -> None:

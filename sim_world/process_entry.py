@@ -18,9 +18,12 @@ import json
 import logging
 import os
 import signal
+import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import asdict, is_dataclass
+from pathlib import Path
 from typing import Any, TextIO
 
 log = logging.getLogger(__name__)
@@ -63,3 +66,20 @@ def say_ready(out: TextIO, prefix: str, info: Any) -> None:
     data = asdict(info) if is_dataclass(info) and not isinstance(info, type) else info
     out.write(prefix + json.dumps(data) + "\n")
     out.flush()
+
+
+def config_entry_point(
+    argv: list[str], module: str, name: str, load: Callable[[dict[str, Any]], Any], serve: Callable[..., int]
+) -> int:
+    """`python -m <module> --config FILE.json`: parse the config with `load`, then `serve(config, stdout,
+    watch_parent=True)`; 2 on bad usage or a bad config (named), else serve's exit code."""
+    if len(argv) != 2 or argv[0] != "--config":
+        print(f"usage: python -m {module} --config FILE.json", file=sys.stderr)
+        return 2
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    try:
+        config = load(json.loads(Path(argv[1]).read_text()))
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        print(f"{name}: bad config {argv[1]}: {exc}", file=sys.stderr)
+        return 2
+    return serve(config, sys.stdout, watch_parent=True)

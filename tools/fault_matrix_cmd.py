@@ -39,7 +39,7 @@ def main(argv: list[str]) -> int:
     except ValueError as exc:
         parser.error(str(exc))
     rows = run_fault_matrix(base)
-    table = format_markdown(rows, base)
+    table = format_markdown(rows, base, command="dronectl fault-matrix " + " ".join(argv))
     print(table)
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -7,26 +7,10 @@ watches its parent and stops when the parent is gone. People use `dronectl sim-v
 
 from __future__ import annotations
 
-import json
-import logging
 import sys
-from pathlib import Path
 
+from sim_world.process_entry import config_entry_point
 from sim_world.sim_vehicle_main import run_from_json, serve
 
-
-def main(argv: list[str]) -> int:
-    if len(argv) != 2 or argv[0] != "--config":
-        print("usage: python -m sim_world.mavlink --config FILE.json", file=sys.stderr)
-        return 2
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    try:
-        run = run_from_json(json.loads(Path(argv[1]).read_text()))
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        print(f"sim-vehicle: bad config {argv[1]}: {exc}", file=sys.stderr)
-        return 2
-    return serve(run, sys.stdout, watch_parent=True)
-
-
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(config_entry_point(sys.argv[1:], "sim_world.mavlink", "sim-vehicle", run_from_json, serve))
