@@ -56,9 +56,6 @@ class MavlinkTlogProxy:
         self._vehicle_sock: socket.socket | None = None
         self._client_sock: socket.socket | None = None
         self._file = None
-        self._parsers = {"vehicle": mavlink.MAVLink(None), "client": mavlink.MAVLink(None)}
-        for parser in self._parsers.values():
-            parser.robust_parsing = True
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.faults = FaultyDelivery(faults) if faults is not None and faults.active else None
@@ -142,8 +139,10 @@ class MavlinkTlogProxy:
 
     def _log(self, side: str, data: bytes) -> None:
         stamp = struct.pack(">Q", int(time.time() * 1e6))
+        parser = mavlink.MAVLink(None)  # per datagram: leftovers of a bad one never eat the next
+        parser.robust_parsing = True
         try:
-            messages = self._parsers[side].parse_buffer(data) or []
+            messages = parser.parse_buffer(data) or []
         except Exception as exc:  # relayed anyway: a datagram the parser chokes on is left out of the log
             log.warning("tlog proxy: %s datagram not logged (%s: %s)", side, type(exc).__name__, exc)
             return

@@ -33,6 +33,7 @@ def test_a_sender_of_garbage_never_becomes_a_telemetry_destination() -> None:
             .pack(M.MAVLink(None, srcSystem=200, srcComponent=1))
         )
         noise.sendto(hello, vehicle.local_address)  # a valid frame: now it is a peer
+        noise.settimeout(5.0)
         assert noise.recv(65535)
 
 

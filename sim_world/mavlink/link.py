@@ -18,7 +18,6 @@ from pymavlink.dialects.v20 import common as mavlink
 log = logging.getLogger(__name__)
 
 Address = tuple[str, int]
-_MAX_PEERS = 64
 
 
 class LinkError(OSError):
@@ -41,7 +40,6 @@ class UdpMavlinkLink:
         self.stats = LinkStats()
         self.last_sender: Address | None = None
         self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
-        self._parsers: dict[Address, mavlink.MAVLink] = {}
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self._sock.bind((bind_host, local_port))
@@ -67,12 +65,10 @@ class UdpMavlinkLink:
                 return out
             except ConnectionRefusedError:
                 continue  # an ICMP "port unreachable" from an earlier send: nobody listening yet
-            parser = self._parsers.get(addr)
-            if parser is None:
-                if len(self._parsers) >= _MAX_PEERS:  # a flood of strangers: forget them, keep listening
-                    self._parsers.clear()
-                parser = self._parsers[addr] = mavlink.MAVLink(None)
-                parser.robust_parsing = True
+            # A datagram holds whole frames: parse each on its own, so bytes left over from a bad
+            # datagram can never swallow the next good one (a fresh parser costs ~2 µs).
+            parser = mavlink.MAVLink(None)
+            parser.robust_parsing = True
             valid = False
             for msg in parser.parse_buffer(data) or []:
                 if isinstance(msg, (mavlink.MAVLink_bad_data, mavlink.MAVLink_unknown)):
