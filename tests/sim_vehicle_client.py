@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pymavlink.dialects.v20 import common as mavlink
 
 Msg = mavlink.MAVLink_message
+WAIT_SLACK = 4.0
 
 
 @dataclass(frozen=True)
@@ -79,9 +80,13 @@ class MavlinkTestClient:
         where: Callable[[Msg], bool] = lambda m: True,
         after: float | None = None,
     ) -> Msg:
-        """The first `kind` message (arrived after `after`, default now) that satisfies `where`."""
+        """The first `kind` message (arrived after `after`, default now) that satisfies `where`.
+
+        The wait is `timeout_s` × `WAIT_SLACK`: a test's timeout says when the vehicle should have
+        answered on an idle machine; on a loaded one (CI, other jobs) only a failure waits longer.
+        """
         start = time.monotonic() if after is None else after
-        deadline = time.monotonic() + timeout_s
+        deadline = time.monotonic() + timeout_s * WAIT_SLACK
         while time.monotonic() < deadline:
             for r in self.since(start, kind):
                 if where(r.msg):
