@@ -32,6 +32,7 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from tempfile import TemporaryDirectory
 from typing import Any
 
 import numpy as np
@@ -44,9 +45,12 @@ from flight.relay import SET_POSITION_TARGET_LOCAL_NED, MavlinkRelay
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import flight_guard
 from flight.scenario import MoveFlight, fly_move
-from flight.sim_process import SimVehicleOptions, SimVehicleProcess
+from flight.sim_launcher import SimulatorProcess
 from flight.types import VelocityBody
 from flight.urls import validate_connection_url
+from sim_world.vehicle.commander import CommanderConfig
+from sim_world.vehicle.config import SimVehicleConfig
+from sim_world.vehicle.serve import READY_PREFIX, SimVehicleRun, run_to_json
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +73,7 @@ class _BenchFlight:
     """One sim-vehicle process with MAVSDK connected through the setpoint-counting relay."""
 
     t0: float  # perf_counter() when the sim-vehicle was launched (or the bench began)
-    sim: SimVehicleProcess | None
+    sim: SimulatorProcess | None
     relay: MavlinkRelay | None
     vehicle: MavsdkVehicle
     safe: SafeVehicle
@@ -87,14 +91,13 @@ def _armed_flight(config: FlightBenchConfig) -> Iterator[_BenchFlight]:
     with ExitStack() as stack:
         sim, relay, url = None, None, f"udpin://127.0.0.1:{base + 2}"
         if config.vehicle_url is None:
-            options = SimVehicleOptions(
-                local_port=base, remote_port=base + 1, boot_delay_s=config.boot_delay_s
+            sim = stack.enter_context(
+                _sim_vehicle(base, config.boot_delay_s, Path(stack.enter_context(TemporaryDirectory())))
             )
-            sim = stack.enter_context(SimVehicleProcess(options))
             relay = stack.enter_context(MavlinkRelay(listen_port=base + 1, client_port=base + 2))
         elif (listen := _udpin_address(config.vehicle_url)) is not None:
             relay = stack.enter_context(
-                MavlinkRelay(listen_port=listen[1], client_port=base + 2, host=listen[0])
+                MavlinkRelay(listen_port=listen[1], client_port=base + 2, listen_host=listen[0])
             )
         else:
             url = config.vehicle_url
@@ -111,6 +114,18 @@ def _armed_flight(config: FlightBenchConfig) -> Iterator[_BenchFlight]:
             yield flight
         if sim is not None:
             log.debug("sim-vehicle said: %s", sim.output()[-500:])
+
+
+def _sim_vehicle(port: int, boot_delay_s: float, folder: Path) -> SimulatorProcess:
+    """A sim-vehicle (no video) binding `port` and sending to `port + 1`, through the one launcher."""
+    vehicle = SimVehicleConfig(
+        local_port=port,
+        remote_port=port + 1,
+        video=False,
+        commander=CommanderConfig(arming_boot_delay_s=boot_delay_s),
+    )
+    run = SimVehicleRun(vehicle=vehicle)
+    return SimulatorProcess("sim_world.vehicle", run_to_json(run), folder / "sim_vehicle.log", READY_PREFIX)
 
 
 def _udpin_address(url: str) -> tuple[str, int] | None:

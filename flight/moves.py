@@ -12,9 +12,9 @@ import math
 import time
 from dataclasses import dataclass
 
+from core.frames import world_ned_to_heading
 from flight.types import Displacement, PositionNed, VelocityBody
 from flight.vehicle import Vehicle
-from sim_world.frames import world_ned_to_heading
 
 log = logging.getLogger(__name__)
 

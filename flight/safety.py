@@ -14,10 +14,10 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
+from core.frames import heading_to_world_ned, world_ned_to_heading
 from flight.errors import FlightError, LinkLostError
 from flight.types import PositionNed, Telemetry, VelocityBody
 from flight.vehicle import Vehicle
-from sim_world.frames import heading_to_world_ned, world_ned_to_heading
 
 log = logging.getLogger(__name__)
 

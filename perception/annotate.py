@@ -15,7 +15,7 @@ from typing import Protocol
 import cv2
 import numpy as np
 
-from perception.centring import is_centred
+from core.centring import is_centred
 from perception.types import Detection
 
 EPSILON_BOX_RGB = (255, 255, 0)
@@ -29,7 +29,7 @@ ARROW_FRACTION = 0.18  # arrow length as a fraction of the image width
 
 
 class ActionLike(Protocol):
-    """What annotate needs of an action (`controller.actions.Action` fits)."""
+    """What annotate needs of an action (`controller.planning.actions.Action` fits)."""
 
     @property
     def name(self) -> str: ...

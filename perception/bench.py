@@ -73,7 +73,7 @@ def bench_detector_latency(
 
 def bench_stream(seed: int, frames: int) -> dict[str, Any]:
     """Render → publish → StreamCamera.read(), one frame in flight at a time, over loopback."""
-    from sim_world.mjpeg import MjpegServer
+    from sim_world.rendering.mjpeg import MjpegServer
 
     render_ms, transit_ms, total_ms = [], [], []
     with _sim_world(seed) as world, MjpegServer(port=0) as server:
@@ -128,7 +128,7 @@ def bench_stream(seed: int, frames: int) -> dict[str, Any]:
 
 def collect_small_dataset(out_dir: Path, seed: int) -> Path:
     """A small held-out set: 90 test images (10 per class) and 30 empty ones."""
-    from sim_world.collect import CollectConfig, collect
+    from sim_world.collection.collect import CollectConfig, collect
 
     collect(
         CollectConfig(
@@ -194,7 +194,7 @@ def bench_main(argv: list[str]) -> int:
 
 
 def _sample_images(data_dir: Path, count: int) -> list[np.ndarray]:
-    from sim_world.dataset import load_manifest
+    from core.dataset import load_manifest
 
     rows, _ = load_manifest(data_dir)
     picked = [r for r in rows if r["split"] in ("test", "empty")][:count]

@@ -1,7 +1,7 @@
 """Detector data: dataset images in memory, their truth boxes, and the training targets.
 
 Reads the dataset folder written by `dronectl collect` (through
-`sim_world.dataset.load_manifest`) into one uint8 tensor. A row is a positive when
+`core.dataset.load_manifest`) into one uint8 tensor. A row is a positive when
 the target's centre is in the image (`in_view`) and part of its face is visible
 (`bbox_px`); every other row (target out of view, split `empty`) is a negative
 that teaches the detector to say nothing. Images of another size are resized to
@@ -21,8 +21,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from core.dataset import DatasetError, load_manifest, read_rgb
 from perception.detector_model import EDGE_SCALE_PX, STRIDE
-from sim_world.dataset import DatasetError, load_manifest, read_rgb
 
 log = logging.getLogger(__name__)
 

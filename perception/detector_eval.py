@@ -25,10 +25,10 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from perception.centring import default_epsilon_px, is_centred
+from core.centring import default_epsilon_px, is_centred
+from core.dataset import DatasetError, load_manifest, read_image_rgb
 from perception.detector import Detector
 from perception.types import Detection
-from sim_world.dataset import DatasetError, load_manifest, read_image_rgb
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,8 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from perception.centring import default_epsilon_px
+from core.centring import default_epsilon_px
+from core.dataset import DatasetError, load_manifest
 from perception.detector_data import (
     DetectorSamples,
     Targets,
@@ -40,7 +41,6 @@ from perception.detector_eval import DetectorMetrics, evaluate_detections, evalu
 from perception.detector_model import STRIDE, CentreNet, DetectorConfig
 from perception.errors import CheckpointError
 from perception.image_detector import ImageDetector, load_model, normalise, save_checkpoint
-from sim_world.dataset import DatasetError, load_manifest
 
 log = logging.getLogger(__name__)
 

@@ -28,9 +28,9 @@ from typing import Any
 
 import numpy as np
 
-from sim_world.camera import CameraConfig
-from sim_world.collect import CollectConfig, collect
-from sim_world.render_workers import RenderWorkers
+from sim_world.collection.collect import CollectConfig, collect
+from sim_world.rendering.camera import CameraConfig
+from sim_world.rendering.render_workers import RenderWorkers
 from sim_world.world import World, WorldConfig
 
 TARGETS = {"physics_rtf": 20.0, "camera_rtf": 3.0, "collect_images_per_s": 50.0}

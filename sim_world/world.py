@@ -22,13 +22,13 @@ from types import TracebackType
 import numpy as np
 import pybullet as p
 
-from sim_world.autopilot import Autopilot, AutopilotParams
-from sim_world.camera import CameraConfig, ForwardCamera, Render
-from sim_world.quadrotor import GRAVITY_M_S2, Quadrotor, QuadrotorParams, RigidBodyState
-from sim_world.scene import Scene
-from sim_world.scene_config import DEFAULT_SCENE, SceneConfig
-from sim_world.target_truth import TargetTruth, target_truth
-from sim_world.wind import Wind, WindConfig
+from sim_world.physics.autopilot import Autopilot, AutopilotParams
+from sim_world.physics.quadrotor import GRAVITY_M_S2, Quadrotor, QuadrotorParams, RigidBodyState
+from sim_world.physics.wind import Wind, WindConfig
+from sim_world.rendering.camera import CameraConfig, ForwardCamera, Render
+from sim_world.scene.builder import Scene
+from sim_world.scene.config import DEFAULT_SCENE, SceneConfig
+from sim_world.scene.target_truth import TargetTruth, target_truth
 
 logger = logging.getLogger(__name__)
 

@@ -13,9 +13,9 @@ from types import TracebackType
 
 import pybullet as p
 
-from sim_world.autopilot import Autopilot, AutopilotMode, AutopilotParams
-from sim_world.quadrotor import GRAVITY_M_S2, Quadrotor, QuadrotorParams, RigidBodyState
-from sim_world.wind import Wind, WindConfig
+from sim_world.physics.autopilot import Autopilot, AutopilotMode, AutopilotParams
+from sim_world.physics.quadrotor import GRAVITY_M_S2, Quadrotor, QuadrotorParams, RigidBodyState
+from sim_world.physics.wind import Wind, WindConfig
 
 PHYSICS_HZ = 240.0
 

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import math
 
+from core.frames import heading_to_world_ned
 from flight.errors import CommandDeniedError
 from flight.types import Attitude, FlightMode, PositionNed, Telemetry, VelocityBody, VelocityNed
 from flight.vehicle import Vehicle
-from sim_world.frames import heading_to_world_ned
 
 
 class FakeVehicle(Vehicle):

@@ -13,8 +13,8 @@ from collections.abc import Callable, Iterable
 
 import numpy as np
 
-from controller.actions import ALL_ACTIONS, Action
-from controller.planners import Observation, Plan
+from controller.planning.actions import ALL_ACTIONS, Action
+from controller.planning.planners import Observation, Plan
 from flight.types import (
     Attitude,
     FlightMode,

@@ -1,8 +1,8 @@
 """A kinematic stand-in for the PyBullet airframe, for unit tests of the MAVLink layer only.
 
-`FakeVehicleModel` implements `sim_world.mavlink.model.VehicleModel` with a point
+`FakeVehicleModel` implements `sim_world.vehicle.model.VehicleModel` with a point
 mass whose velocity follows its setpoint with a first-order lag; its modes and
-refusals mirror `sim_world.autopilot.Autopilot` (hold refused idle on the ground,
+refusals mirror `sim_world.physics.autopilot.Autopilot` (hold refused idle on the ground,
 velocity accepted armed on the ground but flown only once it climbs, takeoff refused
 while disarmed, disarm refused in the air unless forced).
 """
@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 
-from sim_world.frames import heading_to_world_ned
-from sim_world.mavlink.model import AutopilotStatus, Kinematics, ModelRefused
+from core.frames import heading_to_world_ned
+from sim_world.vehicle.model import AutopilotStatus, Kinematics, ModelRefused
 
 
 class FakeVehicleModel:

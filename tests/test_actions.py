@@ -2,7 +2,7 @@
 
 import pytest
 
-from controller.actions import ALL_ACTIONS, NUM_ACTIONS, Action, XMove, ZMove, label_from_offset
+from controller.planning.actions import ALL_ACTIONS, NUM_ACTIONS, Action, XMove, ZMove, label_from_offset
 
 
 def test_index_round_trip_covers_nine_distinct_actions() -> None:

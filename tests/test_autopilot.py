@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from _quad_rig import QuadRig
 
-from sim_world.autopilot import Autopilot, AutopilotError, AutopilotMode, AutopilotParams
-from sim_world.autopilot_control import Mixer
-from sim_world.quadrotor import GRAVITY_M_S2, ROTOR_YAW_SIGN, QuadrotorParams
-from sim_world.wind import Wind, WindConfig
+from sim_world.physics.autopilot import Autopilot, AutopilotError, AutopilotMode, AutopilotParams
+from sim_world.physics.autopilot_control import Mixer
+from sim_world.physics.quadrotor import GRAVITY_M_S2, ROTOR_YAW_SIGN, QuadrotorParams
+from sim_world.physics.wind import Wind, WindConfig
 
 
 def _thrust_n(speeds: np.ndarray, prm: QuadrotorParams) -> float:

@@ -15,8 +15,8 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from sim_world.camera import CameraConfig, ForwardCamera, Intrinsics
-from sim_world.quadrotor import RigidBodyState
+from sim_world.physics.quadrotor import RigidBodyState
+from sim_world.rendering.camera import CameraConfig, ForwardCamera, Intrinsics
 
 NORTH_YAW_ENU_RAD = math.pi / 2.0  # facing the wall (north)
 

@@ -5,14 +5,14 @@ from __future__ import annotations
 import pytest
 from mission_fakes import PX_PER_M, FakeCamera, FakeDetector, FakePlanner, FakeVehicle
 
-from controller.centring_loop import (
+from controller.planning.loop import (
     CentringConfig,
     CentringLoop,
     MoveSchedule,
     Outcome,
     default_stop_margin_px,
 )
-from controller.planners import ClassicPlanner
+from controller.planning.planners import ClassicPlanner
 
 RIGHT, LEFT, UP, DOWN, NONE, RIGHT_UP = 7, 1, 3, 5, 4, 6
 EPSILON = 10.0
@@ -143,7 +143,7 @@ def test_move_length_halves_on_each_reversal_down_to_the_minimum() -> None:
 
 def test_schedule_keeps_the_axes_independent() -> None:
     schedule = MoveSchedule(move_m=0.4, min_move_m=0.1, shrink=0.5)
-    from controller.actions import ALL_ACTIONS
+    from controller.planning.actions import ALL_ACTIONS
 
     assert schedule.lengths_for(ALL_ACTIONS[RIGHT_UP]) == pytest.approx((0.4, 0.4))
     assert schedule.lengths_for(ALL_ACTIONS[LEFT]) == pytest.approx((-0.2, 0.0))  # x reversed, z untouched

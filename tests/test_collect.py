@@ -10,12 +10,12 @@ import cv2
 import numpy as np
 import pytest
 
-import sim_world.collect as collect_module
-from controller.actions import Action, XMove, ZMove, label_from_offset
-from sim_world.collect import CollectConfig, collect, load_manifest
-from sim_world.collect_plan import SECTOR_DIRECTIONS, plan_collection
-from sim_world.dataset import DatasetError
-from sim_world.frames import ned_to_enu
+import sim_world.collection.collect as collect_module
+from controller.planning.actions import Action, XMove, ZMove, label_from_offset
+from core.dataset import DatasetError
+from core.frames import ned_to_enu
+from sim_world.collection.collect import CollectConfig, collect, load_manifest
+from sim_world.collection.plan import SECTOR_DIRECTIONS, plan_collection
 from sim_world.world import World, WorldConfig
 
 TINY = {
@@ -88,7 +88,7 @@ def test_a_row_rebuilds_its_view(tiny_dataset: Path) -> None:
     """The stored pose and scene seed reproduce the stored truth; offset_m is pose_for_offset's input."""
     rows, _ = load_manifest(tiny_dataset)
     row = next(r for r in rows if r["split"] == "train")
-    from sim_world.camera import CameraConfig
+    from sim_world.rendering.camera import CameraConfig
 
     config = WorldConfig(camera=CameraConfig(width=96, height=96))
     with World(config, row["scene_seed"]) as world:

@@ -7,8 +7,8 @@ from pathlib import Path
 import cv2
 import pytest
 
-from sim_world.camera import CameraConfig
-from sim_world.demo import DemoConfig, run_demo
+from sim_world.collection.demo import DemoConfig, run_demo
+from sim_world.rendering.camera import CameraConfig
 from sim_world.world import WorldConfig
 from tools import bench_cmd, collect_cmd, demo_cmd
 

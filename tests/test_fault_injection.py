@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as M
 
-from controller.mission_schema import MissionFileError, parse_mission
-from controller.tlog_proxy import MavlinkTlogProxy
+from controller.missions.schema import MissionFileError, parse_mission
 from flight.link_faults import FaultyDelivery, LinkFaults
-from sim_world.camera import CameraConfig
-from sim_world.mavlink.video import VideoConfig, VideoFaults, WorldVideoFeed
+from flight.relay import MavlinkRelay
+from sim_world.rendering.camera import CameraConfig
+from sim_world.rendering.video import VideoConfig, VideoFaults, WorldVideoFeed
 from sim_world.world import World, WorldConfig
 
 
@@ -57,9 +57,9 @@ def test_the_tlog_relay_applies_link_faults_both_ways(tmp_path: Path) -> None:
     with (
         vehicle,
         client,
-        MavlinkTlogProxy(0, client.getsockname()[1], tmp_path / "f.tlog", faults=faults) as proxy,
+        MavlinkRelay(0, client.getsockname()[1], tmp_path / "f.tlog", faults=faults) as proxy,
     ):
-        listen = proxy._vehicle_sock.getsockname()  # the relay's vehicle-side port
+        listen = proxy.listen_address  # the relay's vehicle-side port
         sent_at = time.monotonic()
         for i in range(200):
             vehicle.sendto(M.MAVLink_heartbeat_message(2, 12, 0, i, 4, 3).pack(mav), listen)
@@ -81,9 +81,9 @@ def test_a_sender_of_garbage_never_becomes_the_relays_vehicle(tmp_path: Path) ->
 
     with (
         socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as noise,
-        MavlinkTlogProxy(0, 9, tmp_path / "g.tlog") as proxy,
+        MavlinkRelay(0, 9, tmp_path / "g.tlog") as proxy,
     ):
-        listen = proxy._vehicle_sock.getsockname()
+        listen = proxy.listen_address
         for _ in range(300):
             noise.sendto(os.urandom(40), listen)
         time.sleep(0.3)

@@ -13,6 +13,7 @@ import time
 from collections.abc import Iterator
 
 import pytest
+from sim_vehicle_process import SimVehicleOptions, SimVehicleProcess
 
 from flight.errors import CommandDeniedError, ConnectionUrlError, LinkLostError, OffboardInterruptedError
 from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
@@ -21,7 +22,6 @@ from flight.pybullet_backend import PyBulletVehicle
 from flight.relay import SET_POSITION_TARGET_LOCAL_NED, MavlinkRelay
 from flight.safety import FlightTimeouts
 from flight.scenario import MoveFlight, fly_move
-from flight.sim_process import SimVehicleOptions, SimVehicleProcess
 from flight.types import FlightMode, VelocityBody
 
 pytestmark = pytest.mark.slow

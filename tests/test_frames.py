@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from _quad_rig import QuadRig
 
-from sim_world.frames import (
+from core.frames import (
     enu_to_ned,
     flu_to_frd,
     frd_to_flu,
@@ -19,7 +19,7 @@ from sim_world.frames import (
     yaw_enu_to_ned_rad,
     yaw_ned_to_enu_rad,
 )
-from sim_world.rotations import quat_from_yaw, quat_rotate, quat_rotate_inverse
+from sim_world.physics.rotations import quat_from_yaw, quat_rotate, quat_rotate_inverse
 
 
 def test_enu_ned_round_trip_and_axes() -> None:

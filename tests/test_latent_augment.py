@@ -5,9 +5,16 @@ import numpy as np
 import pytest
 import torch
 
-from controller.actions import label_from_offset
-from controller.latent.augment import augment, colour_jitter, geometric, labels_of, shear, sheared_offsets
-from controller.latent.config import AugmentConfig
+from controller.planning.actions import label_from_offset
+from controller.planning.latent.augment import (
+    augment,
+    colour_jitter,
+    geometric,
+    labels_of,
+    shear,
+    sheared_offsets,
+)
+from controller.planning.latent.config import AugmentConfig
 
 
 def _disc(size: int, du: float, dv: float) -> torch.Tensor:

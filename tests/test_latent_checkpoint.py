@@ -8,12 +8,12 @@ import torch
 from safetensors import safe_open
 from safetensors.torch import load_file, save_file
 
-from controller.latent.checkpoint import CONFIG_FILE, WEIGHTS_FILE, load_checkpoint, save_checkpoint
-from controller.latent.config import ModelConfig
-from controller.latent.errors import CheckpointError
-from controller.latent.instructions import tokenizer_corpus
-from controller.latent.model import LatentDynamicsModel
-from controller.latent.tokenizer import VOCAB_FILE, InstructionTokenizer
+from controller.planning.latent.checkpoint import CONFIG_FILE, WEIGHTS_FILE, load_checkpoint, save_checkpoint
+from controller.planning.latent.config import ModelConfig
+from controller.planning.latent.errors import CheckpointError
+from controller.planning.latent.instructions import tokenizer_corpus
+from controller.planning.latent.model import LatentDynamicsModel
+from controller.planning.latent.tokenizer import VOCAB_FILE, InstructionTokenizer
 
 
 def _tiny_checkpoint(folder: Path) -> tuple[LatentDynamicsModel, InstructionTokenizer, torch.Tensor]:

@@ -3,8 +3,8 @@
 import pytest
 import torch
 
-from controller.latent.config import ModelConfig
-from controller.latent.image_encoder import ImageEncoder, _final_side, _spatial_softmax
+from controller.planning.latent.config import ModelConfig
+from controller.planning.latent.image_encoder import ImageEncoder, _final_side, _spatial_softmax
 
 
 @pytest.mark.parametrize("size", [48, 64, 100, 128, 160])

@@ -5,8 +5,8 @@ import math
 import pytest
 import torch
 
-from controller.latent.config import LossWeights
-from controller.latent.losses import (
+from controller.planning.latent.config import LossWeights
+from controller.planning.latent.losses import (
     consistency_loss,
     directional_loss,
     distance,

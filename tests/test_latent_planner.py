@@ -4,14 +4,14 @@ import numpy as np
 import pytest
 import torch
 
-from controller.actions import Action
-from controller.latent.checkpoint import load_checkpoint, save_checkpoint
-from controller.latent.config import ModelConfig
-from controller.latent.errors import ImageInputError, InstructionError
-from controller.latent.instructions import tokenizer_corpus
-from controller.latent.model import LatentDynamicsModel
-from controller.latent.planner import LatentPlanner
-from controller.latent.tokenizer import InstructionTokenizer
+from controller.planning.actions import Action
+from controller.planning.latent.checkpoint import load_checkpoint, save_checkpoint
+from controller.planning.latent.config import ModelConfig
+from controller.planning.latent.errors import ImageInputError, InstructionError
+from controller.planning.latent.instructions import tokenizer_corpus
+from controller.planning.latent.model import LatentDynamicsModel
+from controller.planning.latent.planner import LatentPlanner
+from controller.planning.latent.tokenizer import InstructionTokenizer
 
 
 @pytest.fixture(scope="module")

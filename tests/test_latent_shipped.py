@@ -15,9 +15,9 @@ from pathlib import Path
 
 import pytest
 
-from controller.latent.checkpoint import load_checkpoint
-from controller.latent.evaluate import evaluate_checkpoint
-from controller.planners import DEFAULT_CHECKPOINT
+from controller.planning.latent.checkpoint import load_checkpoint
+from controller.planning.latent.evaluate import evaluate_checkpoint
+from controller.planning.planners import DEFAULT_CHECKPOINT
 
 FRESH_SEED = 7_777
 N_FRESH = 90
@@ -30,7 +30,9 @@ def tolerance(p: float, n: int = N_FRESH) -> float:
 
 @pytest.mark.slow
 def test_shipped_checkpoint_keeps_its_accuracy_on_fresh_scenes(tmp_path: Path) -> None:
-    collect_mod = pytest.importorskip("sim_world.collect", reason="sim_world.collect is not available")
+    collect_mod = pytest.importorskip(
+        "sim_world.collection.collect", reason="sim_world.collection.collect is not available"
+    )
     ckpt = load_checkpoint(DEFAULT_CHECKPOINT)
     recorded = json.loads((DEFAULT_CHECKPOINT / "evaluation.json").read_text())
     camera = ckpt.meta["dataset"]["meta"]["camera"]

@@ -5,11 +5,11 @@ from pathlib import Path
 import pytest
 import torch
 
-from controller.latent.config import AugmentConfig, LossWeights, ModelConfig, TrainConfig
-from controller.latent.data import load_images, load_index
-from controller.latent.evaluate import evaluate_checkpoint
-from controller.latent.synthetic import write_synthetic_dataset
-from controller.latent.train import CURVES_FILE, METRICS_FILE, train
+from controller.planning.latent.config import AugmentConfig, LossWeights, ModelConfig, TrainConfig
+from controller.planning.latent.data import load_images, load_index
+from controller.planning.latent.evaluate import evaluate_checkpoint
+from controller.planning.latent.synthetic import write_synthetic_dataset
+from controller.planning.latent.train import CURVES_FILE, METRICS_FILE, train
 
 
 @pytest.fixture(scope="module")

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from controller.benchmark_missions import BenchmarkConfig, benchmark_missions, format_summary, summarise
-from controller.missions import MissionResult
+from controller.missions.benchmark import BenchmarkConfig, benchmark_missions, format_summary, summarise
+from controller.missions.results import MissionResult
 
 
 def row(index: int, planner: str, passed: bool, steps: int, refinements: int = 0) -> MissionResult:

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from controller.mission_runner import run_mission
-from controller.mission_schema import parse_mission
+from controller.missions.runner import run_mission
+from controller.missions.schema import parse_mission
 from flight.safety import FlightTimeouts, SafetyLimits
-from sim_world.mjpeg import MjpegServer
+from sim_world.rendering.mjpeg import MjpegServer
 
 REPO = Path(__file__).resolve().parents[1]
 

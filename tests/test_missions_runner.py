@@ -8,10 +8,10 @@ from pathlib import Path
 import pytest
 from mission_fakes import FakeCamera, FakeDetector, FakePlanner, FakeVehicle
 
-from controller.flight_kit import FlightKit
-from controller.mission_runner import fly_kit
-from controller.mission_schema import parse_mission
-from controller.planners import ClassicPlanner
+from controller.missions.kits.base import FlightKit
+from controller.missions.runner import fly_kit
+from controller.missions.schema import parse_mission
+from controller.planning.planners import ClassicPlanner
 from flight.safety import GeofenceBox, SafetyLimits
 
 RIGHT = 7
@@ -29,6 +29,7 @@ def kit_for(vehicle: FakeVehicle, planner, detector: FakeDetector | None = None,
         planner=planner,
         epsilon_px=10.0,
         instruction="center the gauge",
+        image_width_px=224,
         truth_probe=detector.truth_offset,
         info={"fake": True},
     )
@@ -142,7 +143,7 @@ def test_an_epsilon_inside_the_stopping_margin_is_refused_before_the_vehicle_is_
 ) -> None:
     vehicle = FakeVehicle(east_m=-0.5)
     kit = kit_for(vehicle, ClassicPlanner())
-    kit.epsilon_px, kit.image_width_px = 2.0, 224  # the default margin is 2 px at 224 px
+    kit.epsilon_px = 2.0  # the default margin is 2 px at 224 px
     mission = parse_mission({"name": "tiny-eps", "planner": "classic", "epsilon_px": 2.0})
     with pytest.raises(ValueError, match="leaves nothing inside the stopping margin"):
         fly_kit(kit, mission, tmp_path, LIMITS)
@@ -150,8 +151,8 @@ def test_an_epsilon_inside_the_stopping_margin_is_refused_before_the_vehicle_is_
 
 
 def test_a_report_folder_that_holds_a_flight_is_never_written_over(tmp_path: Path) -> None:
-    from controller.mission_runner import run_mission
-    from controller.report import ReportFolderError
+    from controller.missions.report import ReportFolderError
+    from controller.missions.runner import run_mission
 
     earlier = tmp_path / "earlier"
     earlier.mkdir()
@@ -166,7 +167,7 @@ def test_a_report_folder_that_holds_a_flight_is_never_written_over(tmp_path: Pat
 
 
 def test_a_mission_that_cannot_start_still_writes_a_report_saying_why(tmp_path: Path) -> None:
-    from controller.mission_runner import run_mission
+    from controller.missions.runner import run_mission
 
     broken = tmp_path / "ckpt"
     broken.mkdir()

@@ -7,9 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from controller.centring_loop import Outcome
-from controller.mission_schema import MissionFileError, RandomStart, StartOffset, load_mission, parse_mission
-from controller.missions import judge, load_suite
+from controller.missions.results import judge
+from controller.missions.schema import MissionFileError, RandomStart, StartOffset, load_mission, parse_mission
+from controller.missions.suite import load_suite
+from controller.planning.loop import Outcome
 
 MISSIONS_DIR = Path(__file__).resolve().parents[1] / "missions" / "regression"
 

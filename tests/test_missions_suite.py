@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from controller.suite import SuiteOptions, format_table, run_suite, write_junit
+from controller.missions.suite import SuiteOptions, format_table, run_suite, write_junit
 
 REGRESSION = Path(__file__).resolve().parents[1] / "missions" / "regression"
 UDP_BASE, HTTP_BASE = 14800, 18800  # this file's share of the port ranges (one slot: 14800-14803)

@@ -10,7 +10,7 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from controller.tlog_proxy import MavlinkTlogProxy
+from flight.relay import MavlinkRelay
 
 LISTEN_PORT, CLIENT_PORT = 14880, 14881  # this file's share of the UDP range
 
@@ -37,7 +37,7 @@ def test_relays_both_ways_and_writes_a_readable_tlog(tmp_path: Path) -> None:
         1, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0
     )
     command_bytes = command.pack(client_mav)
-    with MavlinkTlogProxy(LISTEN_PORT, CLIENT_PORT, path) as proxy:
+    with MavlinkRelay(LISTEN_PORT, CLIENT_PORT, path) as proxy:
         vehicle.sendto(heartbeat + attitude, ("127.0.0.1", LISTEN_PORT))  # two packets in one datagram
         data, proxy_address = client.recvfrom(65535)
         assert data == heartbeat + attitude  # forwarded unchanged
@@ -60,10 +60,8 @@ def test_relays_both_ways_and_writes_a_readable_tlog(tmp_path: Path) -> None:
 
 def test_a_taken_port_is_named(tmp_path: Path) -> None:
     blocker = _udp(LISTEN_PORT)
-    proxy = MavlinkTlogProxy(LISTEN_PORT, CLIENT_PORT, tmp_path / "x.tlog")
     try:
         with pytest.raises(OSError, match=f"udp 127.0.0.1:{LISTEN_PORT}"):
-            proxy.start()
+            MavlinkRelay(LISTEN_PORT, CLIENT_PORT, tmp_path / "x.tlog")
     finally:
-        proxy.close()
         blocker.close()

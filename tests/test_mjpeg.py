@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from sim_world.mjpeg import BOUNDARY, MjpegServer
+from sim_world.rendering.mjpeg import BOUNDARY, MjpegServer
 
 PORT = 18000
 

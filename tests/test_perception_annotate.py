@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.actions import Action, XMove, ZMove
+from controller.planning.actions import Action, XMove, ZMove
 from perception.annotate import (
     ACTION_ARROW_RGB,
     BBOX_CENTRED_RGB,

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.actions import label_from_offset
-from perception.centring import default_epsilon_px, is_centred, offset_px
+from controller.planning.actions import label_from_offset
+from core.centring import default_epsilon_px, is_centred, offset_px
 from perception.types import Detection
 
 

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import torch
 
+from core.dataset import DatasetError
 from perception.detector_model import DetectorConfig
 from perception.detector_train import TrainDetectorConfig, train_detector
 from perception.image_detector import ImageDetector
-from sim_world.dataset import DatasetError
 
 SIZE = 64
 KINDS = ("gauge", "valve", "switchbox")

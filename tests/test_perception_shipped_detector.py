@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 import torch
 
-from controller.actions import label_from_offset
-from perception.centring import is_centred, offset_px
+from controller.planning.actions import label_from_offset
+from core.centring import is_centred, offset_px
+from core.dataset import load_manifest
 from perception.detector_eval import evaluate_on_dataset, read_image_rgb
 from perception.image_detector import ImageDetector
-from sim_world.collect import CollectConfig, collect
-from sim_world.collect_plan import View, drone_pose_for_view
-from sim_world.dataset import load_manifest
+from sim_world.collection.collect import CollectConfig, collect
+from sim_world.collection.plan import View, drone_pose_for_view
 from sim_world.world import World
 
 SEED = 90210  # scenes of this seed were never used for training

@@ -15,7 +15,7 @@ import pytest
 
 from perception.errors import CameraClosedError, CameraOpenError, CameraStreamEndedError, CameraTimeoutError
 from perception.stream_camera import StreamCamera
-from sim_world.mjpeg import MjpegServer
+from sim_world.rendering.mjpeg import MjpegServer
 
 PORT = 18010
 BITS = 8

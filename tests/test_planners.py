@@ -5,8 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.actions import Action, XMove, ZMove
-from controller.planners import ClassicPlanner, Observation, OraclePlanner, RandomPlanner, make_planner
+from controller.planning.actions import Action, XMove, ZMove
+from controller.planning.planners import (
+    ClassicPlanner,
+    Observation,
+    OraclePlanner,
+    RandomPlanner,
+    make_planner,
+)
 from perception.types import Detection
 
 IMAGE = np.zeros((224, 224, 3), np.uint8)

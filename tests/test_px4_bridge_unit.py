@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
+from sim_world.physics.wind import WindConfig
 from sim_world.px4_bridge.geodesy import HomePoint, magnetic_field_ned_gauss, pressure_hpa, temperature_c
 from sim_world.px4_bridge.messages import (
     ACCEL_BITS,
@@ -33,8 +34,7 @@ from sim_world.px4_bridge.px4_process import (
 )
 from sim_world.px4_bridge.run import Px4SimConfig, config_from_json, config_to_json
 from sim_world.px4_bridge.sensors import SensorNoise, SensorSuite, Truth
-from sim_world.sim_vehicle_main import StartOffset
-from sim_world.wind import WindConfig
+from sim_world.vehicle.serve import StartOffset
 
 ZURICH = HomePoint()
 

@@ -22,8 +22,8 @@ import pytest
 from px4_helpers import PX4_DIR, requires_px4, session_members, wait_gone
 from pymavlink import mavutil
 
-from controller.mission_runner import run_mission
-from controller.mission_schema import load_mission
+from controller.missions.runner import run_mission
+from controller.missions.schema import load_mission
 from flight.errors import VehicleConnectionError
 from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
 from flight.safe_vehicle import SafeVehicle

@@ -9,7 +9,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from sim_world.quadrotor import GRAVITY_M_S2, ROTOR_YAW_SIGN, Quadrotor, QuadrotorParams
+from sim_world.physics.quadrotor import GRAVITY_M_S2, ROTOR_YAW_SIGN, Quadrotor, QuadrotorParams
 
 DT = 1.0 / 240.0
 

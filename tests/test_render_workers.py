@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim_world.camera import CameraConfig
-from sim_world.render_workers import RenderWorkerError, RenderWorkers
+from sim_world.rendering.camera import CameraConfig
+from sim_world.rendering.render_workers import RenderWorkerError, RenderWorkers
 from sim_world.world import World, WorldConfig
 
 CONFIG = WorldConfig(camera=CameraConfig(width=96, height=96))

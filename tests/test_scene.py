@@ -13,12 +13,12 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from sim_world.frames import yaw_enu_to_ned_rad
-from sim_world.scene import Scene
-from sim_world.scene_assets import AssetCache
-from sim_world.scene_bodies import BodyBuilder, Part
-from sim_world.scene_config import DEFAULT_SCENE, SceneConfig
-from sim_world.scene_sampling import (
+from core.frames import yaw_enu_to_ned_rad
+from sim_world.scene.assets import AssetCache
+from sim_world.scene.bodies import BodyBuilder, Part
+from sim_world.scene.builder import Scene
+from sim_world.scene.config import DEFAULT_SCENE, SceneConfig
+from sim_world.scene.sampling import (
     GAUGE_STANDOFF_M,
     SWITCHBOX_DEPTH_M,
     VALVE_STANDOFF_M,

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from sim_world.scene_config import DEFAULT_SCENE, SceneConfigError, load_scene_config
+from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
 
 SCENES_DIR = Path(__file__).resolve().parents[1] / "scenes"
 

@@ -17,8 +17,7 @@ from pathlib import Path
 
 import pytest
 from px4_helpers import wait_gone
-
-from flight.sim_process import SimVehicleOptions, SimVehicleProcess
+from sim_vehicle_process import SimVehicleOptions, SimVehicleProcess
 
 REPO = Path(__file__).resolve().parents[1]
 MISSION = REPO / "missions" / "regression" / "hil_sim_mavlink.yaml"
@@ -99,8 +98,8 @@ def _faulty_mission(tmp_path: Path, faults: str) -> Path:
 
 
 def test_a_vehicle_that_dies_mid_flight_ends_the_mission_with_a_complete_report(tmp_path: Path) -> None:
-    from controller.mission_runner import run_mission
-    from controller.mission_schema import load_mission
+    from controller.missions.runner import run_mission
+    from controller.missions.schema import load_mission
 
     mission = load_mission(_faulty_mission(tmp_path, "{vehicle_dies_at_s: 5.0}"))
     result = run_mission(mission, tmp_path / "run", media=False)
@@ -114,8 +113,8 @@ def test_a_vehicle_that_dies_mid_flight_ends_the_mission_with_a_complete_report(
 def test_a_camera_that_dies_mid_flight_ends_the_mission_landed(tmp_path: Path) -> None:
     from pymavlink import mavutil
 
-    from controller.mission_runner import run_mission
-    from controller.mission_schema import load_mission
+    from controller.missions.runner import run_mission
+    from controller.missions.schema import load_mission
 
     mission = load_mission(_faulty_mission(tmp_path, "{camera: {dies_at_s: 5.0}}"))
     result = run_mission(mission, tmp_path / "run", media=False)

@@ -11,23 +11,23 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 from sim_vehicle_fakes import FakeVehicleModel
 
-from sim_world.mavlink import px4_modes as modes
-from sim_world.mavlink.commander import Commander, CommanderConfig, FailsafeStage
-from sim_world.mavlink.params import (
+from sim_world.vehicle import px4_modes as modes
+from sim_world.vehicle.commander import Commander, CommanderConfig, FailsafeStage
+from sim_world.vehicle.params import (
     ParamError,
     ParameterStore,
     decode_param_value,
     encode_param_value,
     parse_param_overrides,
 )
-from sim_world.mavlink.setpoints import (
+from sim_world.vehicle.setpoints import (
     VELOCITY_YAWRATE_MASK,
     SetpointFrame,
     SetpointRejected,
     VelocitySetpoint,
     decode_setpoint,
 )
-from sim_world.mavlink.telemetry import MessageScheduler
+from sim_world.vehicle.telemetry import MessageScheduler
 
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 DENIED = mavlink.MAV_RESULT_DENIED

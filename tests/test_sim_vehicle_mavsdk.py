@@ -12,11 +12,11 @@ from mavsdk import ComponentType, Configuration, Mavsdk
 from mavsdk.plugins.action import Action
 from mavsdk.plugins.telemetry import FlightMode, Telemetry
 
-from sim_world.camera import CameraConfig
-from sim_world.mavlink.commander import CommanderConfig
-from sim_world.mavlink.config import SimVehicleConfig
-from sim_world.mavlink.world_model import WorldVehicleModel
-from sim_world.mavlink_vehicle import SimVehicle
+from sim_world.rendering.camera import CameraConfig
+from sim_world.vehicle.commander import CommanderConfig
+from sim_world.vehicle.config import SimVehicleConfig
+from sim_world.vehicle.server import SimVehicle
+from sim_world.vehicle.world_model import WorldVehicleModel
 from sim_world.world import World, WorldConfig
 
 PORT = 14640  # 14640-14641; 14650-14669 belong to test_sim_vehicle_offboard_ground.py

@@ -15,11 +15,11 @@ import numpy as np
 from pymavlink.dialects.v20 import common as M
 from sim_vehicle_client import MavlinkTestClient
 
-from sim_world.camera import CameraConfig
-from sim_world.mavlink.config import SimVehicleConfig
-from sim_world.mavlink.video import VideoConfig, WorldVideoFeed
-from sim_world.mavlink.world_model import WorldVehicleModel
-from sim_world.mavlink_vehicle import SimVehicle
+from sim_world.rendering.camera import CameraConfig
+from sim_world.rendering.video import VideoConfig, WorldVideoFeed
+from sim_world.vehicle.config import SimVehicleConfig
+from sim_world.vehicle.server import SimVehicle
+from sim_world.vehicle.world_model import WorldVehicleModel
 from sim_world.world import World, WorldConfig
 
 DRONECTL = [sys.executable, "-m", "tools.dronectl", "sim-vehicle"]

@@ -6,7 +6,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from sim_world.camera import CameraConfig
+from sim_world.rendering.camera import CameraConfig
 from sim_world.world import World, WorldConfig
 
 SMALL = WorldConfig(camera=CameraConfig(width=128, height=128))

@@ -18,9 +18,9 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from controller.benchmark_missions import BenchmarkConfig, format_summary, run_benchmark
-from controller.mission_schema import FaultSpec
-from controller.report import ReportFolderError
+from controller.missions.benchmark import BenchmarkConfig, format_summary, run_benchmark
+from controller.missions.report import ReportFolderError
+from controller.missions.schema import FaultSpec
 from sim_world.px4_bridge.px4_process import Px4FolderError, find_px4_dir
 
 

@@ -38,9 +38,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
-    from sim_world.collect import CollectConfig, collect
-    from sim_world.dataset import DatasetError
-    from sim_world.scene_config import DEFAULT_SCENE, SceneConfigError, load_scene_config
+    from core.dataset import DatasetError
+    from sim_world.collection.collect import CollectConfig, collect
+    from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
 
     try:
         scene = load_scene_config(args.scene) if args.scene else DEFAULT_SCENE

@@ -28,8 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
-    from sim_world.demo import DemoConfig, DemoFrame, run_demo
-    from sim_world.scene_config import DEFAULT_SCENE, SceneConfigError, load_scene_config
+    from sim_world.collection.demo import DemoConfig, DemoFrame, run_demo
+    from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
     from sim_world.world import WorldConfig
 
     def show(frame: DemoFrame) -> None:

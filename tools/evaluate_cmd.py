@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from controller.actions import ALL_ACTIONS
+from controller.planning.actions import ALL_ACTIONS
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -33,7 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
-    from controller.latent.evaluate import evaluate_checkpoint
+    from controller.planning.latent.evaluate import evaluate_checkpoint
 
     result = evaluate_checkpoint(
         args.model, args.data, args.instructions, args.split, args.epsilon_px, args.seed
@@ -47,7 +47,7 @@ def main(argv: list[str]) -> int:
     for name, row in zip(names, result.confusion, strict=True):
         print(f"{name:>11} " + " ".join(f"{v:>11}" for v in row))
     if args.latency > 0:
-        from controller.latent.bench import latency_on_dataset
+        from controller.planning.latent.bench import latency_on_dataset
 
         lat = latency_on_dataset(args.model, args.data, args.split, args.latency, args.threads)
         print(

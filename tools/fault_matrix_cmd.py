@@ -3,7 +3,7 @@
     dronectl fault-matrix --vehicle sim-mavlink --n 20 --seed 1 --parallel 2 --out fault_matrix.md
 
 Rows: no fault, a lossy and late link, a bad radio, dropped frames, a frozen picture, a
-dying stream, gusts, a dying vehicle (see `controller.fault_matrix.DEFAULT_ROWS`). Each row
+dying stream, gusts, a dying vehicle (see `controller.missions.fault_matrix.DEFAULT_ROWS`). Each row
 also gives the `dronectl benchmark-missions` command that reproduces it alone.
 """
 
@@ -15,8 +15,8 @@ import logging
 import sys
 from pathlib import Path
 
-from controller.benchmark_missions import BenchmarkConfig
-from controller.fault_matrix import format_markdown, run_fault_matrix
+from controller.missions.benchmark import BenchmarkConfig
+from controller.missions.fault_matrix import format_markdown, run_fault_matrix
 
 
 def main(argv: list[str]) -> int:

@@ -25,7 +25,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from controller.mission_schema import (
+from controller.missions.results import MissionResult
+from controller.missions.schema import (
     PLANNER_NAMES,
     PX4_SITL,
     Mission,
@@ -33,7 +34,6 @@ from controller.mission_schema import (
     Px4Spec,
     load_mission,
 )
-from controller.missions import MissionResult
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "default.yaml"
 
@@ -134,8 +134,8 @@ def main(argv: list[str]) -> int:
     except (MissionFileError, ValueError) as exc:
         print(f"dronectl fly: {exc}", file=sys.stderr)
         return 2
-    from controller.mission_runner import run_mission
-    from controller.report import ReportFolderError, claim_report_dir, fresh_report_dir
+    from controller.missions.report import ReportFolderError, claim_report_dir, fresh_report_dir
+    from controller.missions.runner import run_mission
 
     default_out = Path("runs") / "fly" / f"{mission.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     try:

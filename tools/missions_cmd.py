@@ -13,9 +13,9 @@ import sys
 import time
 from pathlib import Path
 
-from controller.mission_schema import PLANNER_NAMES, MissionFileError
-from controller.report import ReportFolderError, fresh_report_dir
-from controller.suite import SuiteOptions, format_table, run_suite, write_junit
+from controller.missions.report import ReportFolderError, fresh_report_dir
+from controller.missions.schema import PLANNER_NAMES, MissionFileError
+from controller.missions.suite import SuiteOptions, format_table, run_suite, write_junit
 
 
 def main(argv: list[str]) -> int:

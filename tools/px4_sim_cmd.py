@@ -13,14 +13,14 @@ import argparse
 import sys
 from pathlib import Path
 
-from sim_world.mavlink.params import ParamError, parse_param_overrides
 from sim_world.px4_bridge.bridge import BridgeTiming
 from sim_world.px4_bridge.geodesy import HomePoint
 from sim_world.px4_bridge.px4_process import MAX_INSTANCE, Px4FolderError, find_px4_dir
 from sim_world.px4_bridge.run import Px4SimConfig, serve
 from sim_world.px4_bridge.sensors import SensorNoise
-from sim_world.scene_config import DEFAULT_SCENE, SceneConfigError, load_scene_config
-from sim_world.sim_vehicle_main import StartOffset
+from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
+from sim_world.vehicle.params import ParamError, parse_param_overrides
+from sim_world.vehicle.serve import StartOffset
 
 
 def parse_speed(text: str) -> float | None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from controller.latent.config import PRESETS
+from controller.planning.latent.config import PRESETS
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -30,7 +30,7 @@ def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
     if args.seeds < 1 or args.workers < 1:
         raise SystemExit("dronectl reproduce: --seeds and --workers must be >= 1")
-    from controller.latent.reproduce import reproduce
+    from controller.planning.latent.reproduce import reproduce
 
     path = reproduce(
         args.data,

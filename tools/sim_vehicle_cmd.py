@@ -10,11 +10,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from sim_world.mavlink.commander import CommanderConfig
-from sim_world.mavlink.config import SimVehicleConfig
-from sim_world.mavlink.params import ParamError, parse_param_overrides
-from sim_world.scene_config import DEFAULT_SCENE, SceneConfigError, load_scene_config
-from sim_world.sim_vehicle_main import SimVehicleRun, StartOffset, serve
+from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
+from sim_world.vehicle.commander import CommanderConfig
+from sim_world.vehicle.config import SimVehicleConfig
+from sim_world.vehicle.params import ParamError, parse_param_overrides
+from sim_world.vehicle.serve import SimVehicleRun, StartOffset, serve
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -7,7 +7,7 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
-from controller.latent.config import (
+from controller.planning.latent.config import (
     DISTANCES,
     FUSIONS,
     POOLINGS,
@@ -123,7 +123,7 @@ def main(argv: list[str]) -> int:
         model_overrides=model_over,
         train_overrides=train_over,
     )
-    from controller.latent.train import train  # torch is imported only once arguments are valid
+    from controller.planning.latent.train import train  # torch is imported only once arguments are valid
 
     result = train(args.data, args.out, run.model, run.train, progress=not args.quiet)
     print(

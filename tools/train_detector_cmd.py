@@ -8,10 +8,10 @@ from pathlib import Path
 
 import torch
 
+from core.dataset import DatasetError
 from perception.detector_model import DetectorConfig
 from perception.detector_train import TrainDetectorConfig, train_detector
 from perception.errors import PerceptionError
-from sim_world.dataset import DatasetError
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass
 from functools import lru_cache
 
-from sim_world.mavlink.telemetry import HomePoint
+from sim_world.vehicle.telemetry import HomePoint
 
 __all__ = ["HomePoint", "MagneticField", "magnetic_field_ned_gauss", "pressure_hpa", "temperature_c"]
 

@@ -17,8 +17,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
-from sim_world.camera import CameraConfig
-from sim_world.mavlink.video import VideoConfig, VideoError, VideoFaults, WorldVideoFeed
+from sim_world.physics.quadrotor import QuadrotorParams
+from sim_world.physics.wind import WindConfig
 from sim_world.process_entry import say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
 from sim_world.px4_bridge.bridge import BridgeStats, BridgeTiming, CameraClock, Px4Bridge
@@ -31,10 +31,10 @@ from sim_world.px4_bridge.link import (
 )
 from sim_world.px4_bridge.px4_process import MAX_INSTANCE, Px4Options, Px4Process, Px4StartError
 from sim_world.px4_bridge.sensors import SensorNoise, SensorSuite
-from sim_world.quadrotor import QuadrotorParams
-from sim_world.scene_config import DEFAULT_SCENE, SceneConfig, parse_scene_config
-from sim_world.sim_vehicle_main import StartOffset
-from sim_world.wind import WindConfig
+from sim_world.rendering.camera import CameraConfig
+from sim_world.rendering.video import VideoConfig, VideoError, VideoFaults, WorldVideoFeed
+from sim_world.scene.config import DEFAULT_SCENE, SceneConfig, parse_scene_config
+from sim_world.vehicle.serve import StartOffset
 from sim_world.world import World, WorldConfig, derived_seed
 
 log = logging.getLogger(__name__)

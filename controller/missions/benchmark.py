@@ -1,0 +1,339 @@
+"""Randomised centring missions from unseen scene seeds, planners side by side.
+
+Mission i of a benchmark with seed S flies scene seed `scene_seed(S, i)` (31-bit,
+drawn from `SeedSequence([S, i])`; the training scenes are drawn the same way from
+the dataset seed, so the chance of meeting one is ~1e-5, and seeds a checkpoint
+lists as seen in training are skipped), a random target kind, and a random start
+with the target anywhere in `view_fraction` of the half view, at a random
+distance and yaw. Every planner flies the same missions.
+
+Per planner: success rate (centred per truth within ε, within the step budget),
+mean steps over its successes, its mean steps over the oracle's on the missions
+both solved (a ratio of means), final truth offset (mean, p95, max), the loop's
+boundary refinement moves (flown when the planner chose "no move" just outside
+the stop threshold: total, and missions that needed one), and the loop's overhead
+per step (everything but the move).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import statistics
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from controller.missions.kits.base import LoadedModels
+from controller.missions.report import REPORT_JSON, claim_report_dir
+from controller.missions.results import MissionResult
+from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission, PortSpec, parse_mission
+from controller.missions.suite import UDP_PORTS_PER_MISSION, failed_to_start
+from flight.safety import SafetyLimits
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class BenchmarkConfig:
+    """What to fly. `vehicle`: `sim` (in-process), `sim-mavlink` (sim-vehicle + MAVSDK + MJPEG) or
+    `px4-sitl` (real PX4 SITL flying the world, lockstep, `px4_speed` "max" by default)."""
+
+    n: int = 200
+    seed: int = 0
+    planners: tuple[str, ...] = ("latent", "classic", "random", "oracle")
+    vehicle: str = SIM
+    max_steps: int = 20
+    epsilon_px: float | None = None
+    view_fraction: tuple[float, float] = (0.1, 0.85)
+    distance_m: tuple[float, float] = (1.5, 3.0)
+    yaw_deg: tuple[float, float] = (-10.0, 10.0)
+    checkpoint: str | None = None
+    detector: str = "image"
+    """`image` (what the product uses) or `truth` (in-process only: isolates the planners from detection)."""
+    detector_checkpoint: str | None = None
+    """The image detector's run folder; None: its shipped weights."""
+    scale_moves: bool = True
+    """The loop's move scheme: scaled with the detector's offset (default) or the paper's fixed lengths."""
+    parallel: int = 1
+    udp_port_base: int = 15400  # 15400-15479: clear of the tests' fixed ports (146xx-150xx)
+    http_port_base: int = 19400
+    px4_dir: str | None = None
+    """PX4 SITL build folder for `px4-sitl` (None: $PX4_SITL_DIR)."""
+    px4_speed: float | str = "max"
+    faults: dict[str, Any] | None = None
+    """Injected faults, the `faults:` section of a mission file (seeded per mission by its scene seed)."""
+
+    def __post_init__(self) -> None:
+        if self.n < 1 or self.parallel < 1:
+            raise ValueError("n and parallel must be >= 1")
+        if self.vehicle not in (SIM, SIM_MAVLINK, PX4_SITL):
+            raise ValueError(
+                f"vehicle must be {SIM!r}, {SIM_MAVLINK!r} or {PX4_SITL!r}, got {self.vehicle!r}"
+            )
+        unknown = set(self.planners) - {"latent", "classic", "random", "oracle"}
+        if unknown or not self.planners:
+            raise ValueError(f"planners must be among latent, classic, random, oracle; got {self.planners}")
+
+
+def scene_seed(seed: int, index: int) -> int:
+    return int(np.random.SeedSequence([seed, index, 0xBE7C]).generate_state(1)[0] >> 1)
+
+
+def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozenset[int]) -> list[Mission]:
+    """The `n` missions for one planner (the same scenes and starts for every planner)."""
+    missions, index = [], 0
+    while len(missions) < config.n:
+        seed = scene_seed(config.seed, index)
+        index += 1
+        if seed in skip_seeds:
+            continue
+        slot = len(missions) % 20
+        missions.append(
+            parse_mission({
+                "name": f"bench-{config.seed}-{len(missions):04d}-{planner}",
+                "tags": ["benchmark"],
+                "scene": {"seed": seed},
+                "start": {"random": {
+                    "seed": seed, "view_fraction": list(config.view_fraction),
+                    "distance_m": list(config.distance_m), "yaw_deg": list(config.yaw_deg),
+                }},
+                "vehicle": config.vehicle,
+                "planner": planner,
+                "checkpoint": config.checkpoint,
+                "detector": config.detector,
+                "epsilon_px": config.epsilon_px,
+                "max_steps": config.max_steps,
+                "loop": {"scale_moves": config.scale_moves},
+                "expect": {"outcome": "centred", "max_steps": config.max_steps},
+                "ports": PortSpec(
+                    mavlink_udp=config.udp_port_base + UDP_PORTS_PER_MISSION * slot,
+                    http=config.http_port_base + slot,
+                ).model_dump(),
+                **({"px4": {"dir": config.px4_dir, "speed": config.px4_speed, "keep_ulog": False}}
+                   if config.vehicle == PX4_SITL else {}),
+                **({"faults": {**config.faults, "seed": seed}} if config.faults else {}),
+            })
+        )  # fmt: skip
+    return missions
+
+
+def _load_models(config: BenchmarkConfig) -> LoadedModels:
+    from controller.planning.planners import LatentPlannerAdapter
+    from perception.image_detector import ImageDetector
+
+    latent = LatentPlannerAdapter(config.checkpoint) if "latent" in config.planners else None
+    detector = None
+    if config.detector == "image":
+        path = config.detector_checkpoint
+        detector = ImageDetector.shipped() if path is None else ImageDetector.load(path)
+    return LoadedModels(detector=detector, latent=latent, latent_checkpoint=config.checkpoint)
+
+
+# Each worker process loads the models once (`_init_worker`, the pool's initializer) and keeps them here.
+_WORKER_MODELS: dict[str, LoadedModels] = {}
+
+
+def _init_worker(config: BenchmarkConfig) -> None:
+    import torch
+
+    torch.set_num_threads(1)
+    _WORKER_MODELS["models"] = _load_models(config)
+
+
+def _fly(mission: Mission, out_dir: Path, models: LoadedModels | None = None) -> MissionResult:
+    from controller.missions.runner import run_mission
+
+    models = models or _WORKER_MODELS.get("models")
+    start = time.perf_counter()
+    try:
+        return run_mission(mission, out_dir, media=False, models=models)
+    except Exception as exc:
+        log.error("benchmark mission %s could not fly: %s", mission.name, exc)
+        return failed_to_start(mission, f"{type(exc).__name__}: {exc}", time.perf_counter() - start)
+
+
+def run_benchmark(
+    config: BenchmarkConfig, skip_seeds: frozenset[int] = frozenset(), report_dir: Path | None = None
+) -> dict[str, Any]:
+    """Fly every planner on the same missions; returns the summary and every mission's row (JSON-able)."""
+    with tempfile.TemporaryDirectory(prefix="bench-missions-") as tmp:
+        out = claim_report_dir(report_dir) if report_dir is not None else Path(tmp)
+        runs = [(m, out / m.name) for p in config.planners for m in benchmark_missions(config, p, skip_seeds)]
+        results: list[MissionResult] = []
+        started = time.perf_counter()
+        if config.parallel == 1:
+            models = _load_models(config)
+            for mission, path in tqdm(runs, desc="missions", unit="mission"):
+                results.append(_fly(mission, path, models))
+        else:
+            ctx = get_context("spawn")
+            with ProcessPoolExecutor(
+                config.parallel, ctx, initializer=_init_worker, initargs=(config,)
+            ) as pool:
+                futures = [pool.submit(_fly, m, p) for m, p in runs]
+                results = [f.result() for f in tqdm(futures, desc="missions", unit="mission")]
+        wall_s = time.perf_counter() - started
+        summary = summarise(config, results, wall_s)
+        summary["limits"]["reports_incomplete"] = [m.name for m, path in runs if not _report_complete(path)]
+    return summary
+
+
+def _report_complete(folder: Path) -> bool:
+    """A report.json that says how the mission ended (finished, or failed to start and why)."""
+    try:
+        report = json.loads((folder / REPORT_JSON).read_text())
+    except (OSError, ValueError):
+        return False
+    return report.get("status") in ("finished", "failed_to_start") and "outcome" in report
+
+
+def _by_index(results: list[MissionResult], planner: str) -> dict[str, MissionResult]:
+    return {r.name.rsplit("-", 1)[0]: r for r in results if r.planner == planner}
+
+
+def summarise(config: BenchmarkConfig, results: list[MissionResult], wall_s: float) -> dict[str, Any]:
+    oracle = _by_index(results, "oracle")
+    planners: dict[str, Any] = {}
+    for planner in config.planners:
+        rows = _by_index(results, planner)
+        ok = [r for r in rows.values() if r.passed]
+        errors = [r.final_truth_error_px for r in rows.values() if r.final_truth_error_px is not None]
+        both = [key for key, r in rows.items() if r.passed and key in oracle and oracle[key].passed]
+        oracle_steps = sum(oracle[key].steps for key in both)
+        overhead = [r.overhead_ms_mean for r in rows.values() if r.overhead_ms_mean is not None]
+        planners[planner] = {
+            "missions": len(rows),
+            "successes": len(ok),
+            "success_rate": len(ok) / len(rows) if rows else 0.0,
+            "mean_steps": statistics.fmean(r.steps for r in ok) if ok else None,
+            "mean_steps_over_oracle": sum(rows[k].steps for k in both) / oracle_steps
+            if oracle_steps
+            else None,
+            "missions_both_solved": len(both),
+            "final_offset_px_mean": statistics.fmean(errors) if errors else None,
+            "final_offset_px_p95": float(np.percentile(errors, 95)) if errors else None,
+            "final_offset_px_max": max(errors) if errors else None,
+            "overhead_ms_mean": statistics.fmean(overhead) if overhead else None,
+            "refinement_moves": sum(r.refinement_moves for r in rows.values()),
+            "missions_with_refinement": sum(r.refinement_moves > 0 for r in rows.values()),
+            "outcomes": {
+                o: sum(r.outcome == o for r in rows.values()) for o in {r.outcome for r in rows.values()}
+            },
+        }
+    summary = {
+        "config": {**config.__dict__, "planners": list(config.planners)},
+        "wall_s": round(wall_s, 1),
+        "planners": planners,
+        "missions": [r.to_json() for r in results],
+    }
+    summary["limits"] = limits_summary(results)
+    ready = [
+        r.vehicle_clock_s["ready_s"] - r.info["px4_clock_offset_s"]
+        for r in results
+        if "ready_s" in r.vehicle_clock_s and "px4_clock_offset_s" in r.info
+    ]
+    if ready:  # PX4 SITL: simulated seconds from the bridge's start to the estimator seen ready by MAVSDK
+        summary["px4_ready_sim_s"] = {
+            "mean": round(statistics.fmean(ready), 2),
+            "max": round(max(ready), 2),
+            "n": len(ready),
+        }
+    return summary
+
+
+LOOP_TIMEOUT_SLACK_S = 10.0
+"""The loop checks its timeout between steps: a run may end one move and one settle past it."""
+
+
+def limits_summary(
+    results: list[MissionResult], limits: SafetyLimits | None = None, timeout_s: float = 120.0
+) -> dict[str, Any]:
+    """Per simulator truth: missions over the speed limit or outside the geofence; the longest run; reports.
+
+    The limits are `SafetyLimits`' defaults (what the missions fly under); the geofence box is
+    around home, where the vehicle armed. Only simulated MAVLink vehicles report truth extremes.
+    """
+    limits = limits or SafetyLimits()
+    fence = limits.geofence
+    judged = [r for r in results if r.truth_extremes]
+    too_fast = [
+        r.name
+        for r in judged
+        if r.truth_extremes["max_horizontal_speed_m_s"] > limits.max_horizontal_speed_m_s
+    ]
+    outside = []
+    if fence is not None:
+        for r in judged:
+            low, high = r.truth_extremes["min_ned_m"], r.truth_extremes["max_ned_m"]
+            if (
+                max(-low[0], high[0]) > fence.half_width_north_m
+                or max(-low[1], high[1]) > fence.half_width_east_m
+                or -low[2] > fence.max_up_m
+            ):
+                outside.append(r.name)
+    return {
+        "judged_by_truth": len(judged),
+        "max_horizontal_speed_m_s": max(
+            (r.truth_extremes["max_horizontal_speed_m_s"] for r in judged), default=None
+        ),
+        "over_speed_limit": too_fast,
+        "outside_geofence": outside,
+        "longest_run_wall_s": round(max((r.wall_s for r in results), default=0.0), 1),
+        "over_timeout": [r.name for r in results if r.vehicle_s > timeout_s + LOOP_TIMEOUT_SLACK_S],
+        "reports_incomplete": [],  # filled in by run_benchmark, which still has the folders
+    }
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    """The side-by-side table."""
+
+    def num(value: float | None, fmt: str) -> str:
+        return "-" if value is None else format(value, fmt)
+
+    cfg = summary["config"]
+    lines = [
+        f"{cfg['n']} missions per planner, seed {cfg['seed']}, vehicle {cfg['vehicle']}, "
+        f"budget {cfg['max_steps']} steps, {'scaled' if cfg.get('scale_moves', True) else 'fixed'} moves, "
+        f"{summary['wall_s']:.0f} s",
+    ]
+    if "px4_ready_sim_s" in summary:
+        r = summary["px4_ready_sim_s"]
+        lines.append(
+            f"PX4 estimator ready (as seen by MAVSDK) {r['mean']:.1f} s simulated on average, "
+            f"{r['max']:.1f} s at most ({r['n']} missions)"
+        )
+    if cfg.get("faults"):
+        lines.append(f"injected faults: {cfg['faults']}")
+    limits = summary.get("limits")
+    if limits and limits["judged_by_truth"]:
+        n = {key: len(limits[key]) for key in ("over_speed_limit", "outside_geofence", "over_timeout")}
+        lines.append(
+            f"per truth ({limits['judged_by_truth']} missions): fastest "
+            f"{limits['max_horizontal_speed_m_s']:.2f} m/s, {n['over_speed_limit']} over the speed limit, "
+            f"{n['outside_geofence']} outside the geofence; longest run {limits['longest_run_wall_s']:.0f} s "
+            f"wall, {n['over_timeout']} over the timeout, "
+            f"{len(limits['reports_incomplete'])} reports incomplete"
+        )
+    lines.append(
+        f"{'planner':<8} {'success':>15} {'mean steps':>10} {'/oracle':>8} {'offset px mean/p95/max':>23} "
+        f"{'refinement moves':>16} {'overhead ms':>11}"
+    )
+    for name, p in summary["planners"].items():
+        refinements = f"{p['refinement_moves']} in {p['missions_with_refinement']}"
+        offsets = "/".join(
+            num(p[k], ".1f") for k in ("final_offset_px_mean", "final_offset_px_p95", "final_offset_px_max")
+        )
+        lines.append(
+            f"{name:<8} {p['successes']:>5}/{p['missions']:<4} {100 * p['success_rate']:>5.1f}% "
+            f"{num(p['mean_steps'], '.2f'):>10} {num(p['mean_steps_over_oracle'], '.2f'):>8} {offsets:>23} "
+            f"{refinements:>16} {num(p['overhead_ms_mean'], '.1f'):>11}"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,101 @@
+"""`FlightKit`: the components one centring flight needs, however they were built.
+
+`controller.missions.runner` builds one per mission backend (in-process sim,
+sim-vehicle over MAVLink, a real vehicle); tests build one from fakes. The loop
+and the report see only this, never the backend.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from controller.missions.schema import Mission
+from controller.planning.loop import TruthProbe
+from controller.planning.planners import Planner, make_planner
+from flight.link_faults import LinkFaults
+from flight.vehicle import Vehicle
+from perception.camera import Camera
+from perception.detector import Detector
+
+TLOG_NAME = "flight.tlog"
+
+
+@dataclass
+class FlightKit:
+    """Everything one flight needs, built from a mission (or from fakes in tests)."""
+
+    vehicle: Vehicle
+    camera: Camera
+    detector: Detector
+    planner: Planner
+    instruction: str
+    image_width_px: int
+    """The camera's image width: ε's default scales with it (resolved once, by the runner)."""
+    truth_probe: TruthProbe | None = None
+    """Judging only: the true target offset in pixels (None without a simulator)."""
+    place_at_start: Callable[[], None] | None = None
+    """In-process sim only: put the hovering drone at the mission's start pose after takeoff."""
+    takeoff_altitude_m: float | None = None
+    """The takeoff altitude where the start pose needs one (sim-vehicle); None: the mission's."""
+    info: dict[str, Any] = field(default_factory=dict)
+    """What the report should say about the setup (scene seed, target kind, start offset, URLs)."""
+    tlog_path: Path | None = None
+    truth_extremes: Callable[[], dict[str, Any] | None] | None = None
+    """Judging only: the simulator's largest speeds and excursions from home over the flight."""
+    epsilon_px: float | None = None
+    """ε when the kit fixes it (tests); None: the mission's, else `default_epsilon_px(image_width_px)`."""
+
+
+@dataclass
+class LoadedModels:
+    """Models loaded once and shared by many missions in one process (benchmarks, suites).
+
+    A mission that asks for the default image detector or the latent planner with
+    this checkpoint uses these instead of loading its own.
+    """
+
+    detector: Detector | None = None
+    latent: Planner | None = None
+    latent_checkpoint: str | None = None
+
+
+def models_detector(mission: Mission, models: LoadedModels | None) -> Detector | None:
+    """The shared image detector, when the mission asks for the default one."""
+    if models is None or mission.detector != "image" or mission.detector_checkpoint is not None:
+        return None
+    return models.detector
+
+
+def models_planner(mission: Mission, models: LoadedModels | None, truth: TruthProbe | None) -> Planner | None:
+    """The shared latent planner, when the mission asks for it with the same checkpoint."""
+    if models is None or mission.planner != "latent" or models.latent is None:
+        return None
+    return models.latent if mission.checkpoint == models.latent_checkpoint else None
+
+
+def image_detector_for(mission: Mission, models: LoadedModels | None) -> Detector:
+    """The mission's image detector: the shared one, its named checkpoint, or the shipped weights."""
+    shared = models_detector(mission, models)
+    if shared is not None:
+        return shared
+    from perception.image_detector import ImageDetector  # torch: loaded only when used
+
+    if mission.detector_checkpoint is not None:
+        return ImageDetector.load(mission.detector_checkpoint)
+    return ImageDetector.shipped()
+
+
+def planner_for(mission: Mission, models: LoadedModels | None, truth: TruthProbe | None) -> Planner:
+    """The mission's planner: the shared latent one, or a new one (the oracle needs truth)."""
+    return models_planner(mission, models, truth) or make_planner(
+        mission.planner, checkpoint=mission.checkpoint, seed=mission.scene.seed, truth_offset=truth
+    )
+
+
+def link_faults_for(mission: Mission) -> LinkFaults | None:
+    """The mission's injected link faults, seeded, for the .tlog relay (None: a clean link)."""
+    spec = mission.faults.link
+    return None if spec is None else LinkFaults(**spec.model_dump(), seed=mission.faults.seed)

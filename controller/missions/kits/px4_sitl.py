@@ -1,0 +1,140 @@
+"""The `px4-sitl` kit of a mission: real PX4 SITL firmware flying the PyBullet world, flown through MAVSDK.
+
+`python -m sim_world.px4_bridge` runs as a child (its own session, gone with us):
+the world with the drone landed below the mission's start pose, its camera as
+MJPEG, and PX4 SITL in external-simulator mode in lockstep with it. The controller
+then talks to PX4 exactly as to a real vehicle: PX4 sends to 127.0.0.1:14540+N,
+where the .tlog relay listens and forwards to MAVSDK; the camera is read with
+OpenCV from the MJPEG stream; the bridge's `/truth.json` is read for judging only.
+
+Every run holds its PX4 instance N (`px4_process.px4_instance`: `auto` takes the lowest
+free one, so parallel missions and test workers never share ports), and gives PX4 a
+random MAVLink system id: MAVSDK connects only to that id, so a PX4 left over from
+another run is never flown.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from pathlib import Path
+
+from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, link_faults_for
+from controller.missions.kits.simulated import (
+    SIM_HFOV_DEG,
+    SIM_IMAGE_PX,
+    SimTruth,
+    new_system_id,
+    simulated_mavlink_kit,
+    video_faults_for,
+)
+from controller.missions.schema import Mission, StartOffset
+from controller.missions.setup import scene_config_for, start_offset_for, wind_config_for
+from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+from flight.relay import MavlinkRelay
+from flight.sim_launcher import SimulatorProcess
+from perception.stream_camera import StreamCamera
+from sim_world.px4_bridge.bridge import PX4_CLOCK_OFFSET_US, BridgeTiming
+from sim_world.px4_bridge.px4_process import find_px4_dir, px4_instance
+from sim_world.px4_bridge.run import OFFBOARD_PORT_BASE, READY_PREFIX, Px4SimConfig, config_to_json
+from sim_world.px4_bridge.sensors import SensorNoise
+from sim_world.vehicle.serve import StartOffset as SimStartOffset
+
+log = logging.getLogger(__name__)
+
+MAVSDK_PORT_BASE = 15140  # MAVSDK listens behind the relay on 15140+N (clear of the tests' 146xx-149xx)
+VIDEO_PORT_BASE = 18900  # the bridge's MJPEG stream on 18900+N
+PX4_START_TIMEOUT_S = 90.0
+
+
+def mission_start_offset(config: Px4SimConfig) -> StartOffset:
+    """The simulator's start offset as the mission schema's type."""
+    o = config.start_offset
+    assert o is not None
+    return StartOffset(right_m=o.right_m, up_m=o.up_m, distance_m=o.distance_m, yaw_deg=o.yaw_deg)
+
+
+def px4_sim_config(mission: Mission, instance: int, out_dir: Path, system_id: int) -> Px4SimConfig:
+    """The simulator's configuration for a mission (its world, start, PX4 options)."""
+    spec = mission.px4
+    start = start_offset_for(mission, SIM_HFOV_DEG, SIM_HFOV_DEG)
+    return Px4SimConfig(
+        px4_dir=find_px4_dir(spec.dir),
+        instance=instance,
+        scene=scene_config_for(mission),
+        seed=mission.scene.seed,
+        start_offset=SimStartOffset(start.right_m, start.up_m, start.distance_m, start.yaw_deg),
+        image_size_px=SIM_IMAGE_PX,
+        video_port=VIDEO_PORT_BASE + instance,
+        timing=BridgeTiming(speed=None if spec.speed == "max" else float(spec.speed)),
+        noise=SensorNoise().scaled(spec.noise),
+        system_id=system_id,
+        params=dict(spec.params),
+        px4_log_dir=out_dir / "px4" if spec.keep_ulog else None,
+        wind=wind_config_for(mission),
+        video_faults=video_faults_for(mission),
+        px4_dies_at_s=mission.faults.vehicle_dies_at_s,
+    )
+
+
+@contextmanager
+def open_px4_sitl_kit(
+    mission: Mission, out_dir: Path, models: LoadedModels | None = None
+) -> Iterator[FlightKit]:
+    """PX4 SITL + bridge (child process) + tlog relay + MAVSDK + MJPEG camera + detector + planner."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    system_id = new_system_id()  # this run's PX4, and no other
+    with ExitStack() as stack:
+        instance = stack.enter_context(px4_instance(mission.px4.instance))
+        config = px4_sim_config(mission, instance, out_dir, system_id)
+        mavsdk_port = MAVSDK_PORT_BASE + instance
+        # The relay takes PX4's offboard port first: a port in use fails the run before PX4 starts.
+        tlog = stack.enter_context(
+            MavlinkRelay(
+                OFFBOARD_PORT_BASE + instance,
+                mavsdk_port,
+                out_dir / TLOG_NAME,
+                faults=link_faults_for(mission),
+            )
+        )
+        sim = stack.enter_context(
+            SimulatorProcess(
+                "sim_world.px4_bridge",
+                config_to_json(config),
+                out_dir / "px4_sim.log",
+                READY_PREFIX,
+                start_timeout_s=PX4_START_TIMEOUT_S,
+                name=f"PX4 SITL instance {instance}",
+            )
+        )
+        truth = SimTruth(sim.ready["truth_url"])
+        vehicle = stack.enter_context(
+            MavsdkVehicle(
+                MavsdkConfig(
+                    url=f"udpin://127.0.0.1:{mavsdk_port}", expected_system_id=system_id, clock="vehicle"
+                )
+            )
+        )
+        camera = stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
+        start = mission_start_offset(config)
+        yield simulated_mavlink_kit(
+            mission, models, vehicle, camera, truth, config.scene, start,
+            info={
+                "backend": "PX4 SITL (real firmware) flying the PyBullet world; MAVSDK + MJPEG",
+                "px4_dir": str(config.px4_dir),
+                "px4_instance": instance,
+                "px4_system_id": system_id,
+                "px4_clock_offset_s": PX4_CLOCK_OFFSET_US / 1e6,
+                "speed": mission.px4.speed,
+                "ports": {
+                    "px4_simulator_tcp": 4560 + instance,
+                    "px4_offboard_udp": OFFBOARD_PORT_BASE + instance,
+                    "mavsdk_udp": mavsdk_port,
+                    "video_http": VIDEO_PORT_BASE + instance,
+                },
+                "simulator_pid": sim.pid,
+                "px4_pid": sim.ready.get("px4_pid"),
+            },
+            tlog_path=tlog.path,
+        )  # fmt: skip

@@ -1,0 +1,72 @@
+"""The kit of a real vehicle: MAVSDK on the mission's URL and the stream camera on its camera URL; no truth.
+
+For a `udpin://` URL the .tlog relay takes the URL's port and MAVSDK listens behind it
+(`REAL_CLIENT_PORT_SHIFT` higher); other links are flown without a .tlog. Nothing here
+imports the simulator: a real-vehicle mission loads no `sim_world` module and no PyBullet.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from pathlib import Path
+
+from controller.missions.kits.base import (
+    TLOG_NAME,
+    FlightKit,
+    LoadedModels,
+    image_detector_for,
+    link_faults_for,
+    planner_for,
+)
+from controller.missions.schema import Mission
+from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+from flight.relay import MavlinkRelay
+from perception.stream_camera import StreamCamera
+
+log = logging.getLogger(__name__)
+
+REAL_CLIENT_PORT_SHIFT = 1000
+
+
+def _udpin_port(url: str) -> int | None:
+    match = re.fullmatch(r"udpin://[^:/]*:(\d+)", url.strip())
+    return int(match.group(1)) if match else None
+
+
+@contextmanager
+def open_real_kit(mission: Mission, out_dir: Path, models: LoadedModels | None = None) -> Iterator[FlightKit]:
+    """A vehicle at `mission.vehicle` and its camera stream; no truth. Fails fast on a bad URL."""
+    with ExitStack() as stack:
+        url = mission.vehicle
+        tlog_path = None
+        port = _udpin_port(url)
+        if port is not None:
+            # The relay takes the vehicle's port; MAVSDK listens behind it, REAL_CLIENT_PORT_SHIFT higher.
+            relay = MavlinkRelay(
+                port,
+                port + REAL_CLIENT_PORT_SHIFT,
+                out_dir / TLOG_NAME,
+                listen_host="0.0.0.0",
+                faults=link_faults_for(mission),
+            )
+            tlog = stack.enter_context(relay)
+            url, tlog_path = f"udpin://127.0.0.1:{port + REAL_CLIENT_PORT_SHIFT}", tlog.path
+        else:
+            log.warning("%s is not a udpin:// link: flying without a .tlog", url)
+        vehicle = stack.enter_context(MavsdkVehicle(MavsdkConfig(url=url, shown_url=mission.vehicle)))
+        camera = stack.enter_context(StreamCamera(mission.camera, timeout_s=3.0, open_timeout_s=10.0))
+        planner = planner_for(mission, models, None)
+        frame = camera.read()
+        yield FlightKit(
+            vehicle=vehicle,
+            camera=camera,
+            detector=image_detector_for(mission, models),
+            planner=planner,
+            instruction=mission.instruction_text(mission.target_kind),
+            info={"backend": "MAVSDK + stream camera", "vehicle": mission.vehicle, "camera": mission.camera},
+            tlog_path=tlog_path,
+            image_width_px=frame.width,
+        )

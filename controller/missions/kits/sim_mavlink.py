@@ -1,0 +1,99 @@
+"""The `sim-mavlink` kit: the simulated drone as a PX4-flavoured MAVLink vehicle, flown like a real one.
+
+The sim-vehicle runs as a child process (`python -m sim_world.vehicle`, through
+`flight.sim_launcher`: its own session, gone with us) with the mission's scene, seed,
+wind, faults and start offset; the controller connects with MAVSDK and reads the MJPEG
+stream with OpenCV, exactly as it would a real drone. Ports (one slot per mission, from
+`mission.ports`): the sim binds UDP `p`, sends to `p+1`, where the .tlog relay listens and
+forwards to MAVSDK on `p+2`; video on HTTP `ports.http`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from pathlib import Path
+
+from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, link_faults_for
+from controller.missions.kits.simulated import (
+    SIM_HFOV_DEG,
+    SIM_IMAGE_PX,
+    SimTruth,
+    new_system_id,
+    simulated_mavlink_kit,
+    video_faults_for,
+)
+from controller.missions.schema import Mission, StartOffset
+from controller.missions.setup import scene_config_for, start_offset_for, wind_config_for
+from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+from flight.relay import MavlinkRelay
+from flight.sim_launcher import SimulatorProcess
+from perception.stream_camera import StreamCamera
+from sim_world.vehicle.config import SimVehicleConfig
+from sim_world.vehicle.serve import READY_PREFIX as SIM_READY_PREFIX
+from sim_world.vehicle.serve import SimVehicleRun, run_to_json
+from sim_world.vehicle.serve import StartOffset as SimStartOffset
+
+READY_TIMEOUT_S = 60.0
+
+
+def sim_vehicle_run(mission: Mission, start: StartOffset, system_id: int) -> SimVehicleRun:
+    """The sim-vehicle for a mission: real time, PX4's boot rules, landed below the start pose."""
+    p = mission.ports.mavlink_udp
+    vehicle = SimVehicleConfig(
+        local_port=p,
+        remote_port=p + 1,
+        sysid=system_id,
+        video_port=mission.ports.http,
+        video_fps=15.0,
+    )
+    offset = SimStartOffset(start.right_m, start.up_m, start.distance_m, start.yaw_deg)
+    return SimVehicleRun(
+        vehicle=vehicle,
+        scene=scene_config_for(mission),
+        seed=mission.scene.seed,
+        start_offset=offset,
+        image_size_px=SIM_IMAGE_PX,
+        wind=wind_config_for(mission),
+        video_faults=video_faults_for(mission),
+        dies_at_s=mission.faults.vehicle_dies_at_s,
+    )
+
+
+@contextmanager
+def open_sim_mavlink_kit(
+    mission: Mission, out_dir: Path, models: LoadedModels | None = None
+) -> Iterator[FlightKit]:
+    """sim-vehicle subprocess + tlog relay + MAVSDK + MJPEG stream camera + detector + planner."""
+    start = start_offset_for(mission, SIM_HFOV_DEG, SIM_HFOV_DEG)  # square image
+    out_dir.mkdir(parents=True, exist_ok=True)
+    system_id = new_system_id()
+    p, http = mission.ports.mavlink_udp, mission.ports.http
+    run = sim_vehicle_run(mission, start, system_id)
+    with ExitStack() as stack:
+        # The relay takes the vehicle's remote port first: a port in use fails before anything starts.
+        tlog = stack.enter_context(
+            MavlinkRelay(p + 1, p + 2, out_dir / TLOG_NAME, faults=link_faults_for(mission))
+        )
+        sim = stack.enter_context(
+            SimulatorProcess(
+                "sim_world.vehicle", run_to_json(run), out_dir / "sim_vehicle.log", SIM_READY_PREFIX,
+                start_timeout_s=READY_TIMEOUT_S, name="sim-vehicle",
+            )
+        )  # fmt: skip
+        truth = SimTruth(sim.ready["truth_url"])
+        vehicle = stack.enter_context(
+            MavsdkVehicle(MavsdkConfig(url=f"udpin://127.0.0.1:{p + 2}", expected_system_id=system_id))
+        )
+        camera = stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
+        yield simulated_mavlink_kit(
+            mission, models, vehicle, camera, truth, run.scene, start,
+            info={
+                "backend": "sim-vehicle subprocess over MAVLink (MAVSDK) + MJPEG stream",
+                "ports": {"sim_udp": p, "tlog_relay_udp": p + 1, "mavsdk_udp": p + 2, "video_http": http},
+                "tlog": "recorded by flight.relay between sim-vehicle and MAVSDK",
+                "system_id": system_id,
+                "simulator_pid": sim.pid,
+            },
+            tlog_path=tlog.path,
+        )  # fmt: skip

@@ -1,0 +1,117 @@
+"""What the kits of simulated MAVLink vehicles (sim-vehicle, PX4 SITL) share.
+
+Both start the drone landed below the mission's start pose and take off to its height,
+give the vehicle a random MAVLink system id that MAVSDK insists on (so a run never flies
+a vehicle it did not launch), and read the simulator's `/truth.json` for judging only.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import secrets
+import urllib.request
+from pathlib import Path
+from typing import Any
+
+from controller.missions.kits.base import FlightKit, LoadedModels, image_detector_for, planner_for
+from controller.missions.schema import Mission, StartOffset
+from flight.mavsdk_backend import MavsdkVehicle
+from perception.stream_camera import StreamCamera
+from sim_world.rendering.camera import CameraConfig
+from sim_world.rendering.video import VideoFaults
+from sim_world.scene.config import SceneConfig
+from sim_world.scene.sampling import sample_scene
+
+log = logging.getLogger(__name__)
+
+SIM_IMAGE_PX = 224
+SIM_HFOV_DEG = CameraConfig().hfov_deg  # the simulators' camera: square, so the same vertically
+PX4_MIN_TAKEOFF_ALT_M = 0.5
+"""PX4 refuses MIS_TAKEOFF_ALT below 0.5 m: a lower start pose is flown from 0.5 m (a few px off the draw)."""
+
+
+def _get_json(url: str, timeout_s: float = 1.0) -> dict[str, Any]:
+    with urllib.request.urlopen(url, timeout=timeout_s) as response:
+        return json.loads(response.read())
+
+
+class SimTruth:
+    """Judging only: the sim-vehicle's truth for its latest frame, over HTTP.
+
+    `/truth.json` answers `{"frame_number": N, "truth": {"target": {...}, "drone": {...}}}`.
+    """
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+
+    def offset_px(self) -> tuple[float, float] | None:
+        try:
+            target = _get_json(self.url)["truth"]["target"]
+        except (OSError, ValueError, KeyError) as exc:
+            log.warning("no truth from %s: %s", self.url, exc)
+            return None
+        return (float(target["offset_px"][0]), float(target["offset_px"][1])) if target["in_view"] else None
+
+    def extremes(self) -> dict[str, Any] | None:
+        """The largest speeds and excursions from home seen in any frame so far (None if unreachable)."""
+        try:
+            return _get_json(self.url)["truth"].get("extremes")
+        except (OSError, ValueError, KeyError) as exc:
+            log.warning("no truth extremes from %s: %s", self.url, exc)
+            return None
+
+    def ground_height_m(self) -> float:
+        return float(_get_json(self.url)["truth"]["drone"]["position_enu_m"][2])
+
+
+def video_faults_for(mission: Mission) -> VideoFaults | None:
+    """The mission's camera faults, for a simulated vehicle's video."""
+    spec = mission.faults.camera
+    return None if spec is None else VideoFaults(**spec.model_dump(), seed=mission.faults.seed)
+
+
+def new_system_id() -> int:
+    """A random MAVLink system id for a vehicle a run launches: MAVSDK then refuses any other vehicle."""
+    return 10 + secrets.randbelow(240)
+
+
+def simulated_mavlink_kit(
+    mission: Mission,
+    models: LoadedModels | None,
+    vehicle: MavsdkVehicle,
+    camera: StreamCamera,
+    truth: SimTruth,
+    scene: SceneConfig,
+    start: StartOffset,
+    info: dict[str, Any],
+    tlog_path: Path | None,
+) -> FlightKit:
+    """The kit of a simulated vehicle flown over MAVLink (sim-vehicle, PX4 SITL): it starts landed below
+    the mission's start pose, so the takeoff climbs to the pose's height; truth judges, never flies."""
+    target = sample_scene(scene, mission.scene.seed).target  # numbers only: the simulator's own draw
+    climb_m = target.height_m + start.up_m - truth.ground_height_m()
+    if climb_m < PX4_MIN_TAKEOFF_ALT_M:
+        log.warning(
+            "start %.2f m above ground: taking off to PX4's minimum %.1f m", climb_m, PX4_MIN_TAKEOFF_ALT_M
+        )
+        climb_m = PX4_MIN_TAKEOFF_ALT_M
+    planner = planner_for(mission, models, truth.offset_px)
+    return FlightKit(
+        vehicle=vehicle,
+        camera=camera,
+        detector=image_detector_for(mission, models),
+        planner=planner,
+        instruction=mission.instruction_text(target.kind),
+        truth_probe=truth.offset_px,
+        truth_extremes=truth.extremes,
+        takeoff_altitude_m=climb_m,
+        info={
+            "scene_seed": mission.scene.seed,
+            "target_kind": target.kind,
+            "start": start.model_dump(),
+            **info,
+        },
+        tlog_path=tlog_path,
+        image_width_px=SIM_IMAGE_PX,
+    )

@@ -1,0 +1,93 @@
+"""Missions: finding mission files, judging a flown mission against its expectations, the result row.
+
+The file format is `controller.missions.schema`; flying one is
+`controller.missions.runner`. A mission passes when the loop's outcome is the
+expected one and every expectation holds; "centred" is judged by simulator
+truth where the mission has it (the detector could be wrong), otherwise by the
+detector's final offset.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from controller.missions.schema import Mission
+from controller.planning.loop import Outcome, StepRecord
+
+
+@dataclass(frozen=True)
+class MissionResult:
+    """One flown mission, as a suite table row and a JSON object."""
+
+    name: str
+    planner: str
+    outcome: str
+    passed: bool
+    failures: tuple[str, ...]
+    steps: int
+    moves: int
+    epsilon_px: float
+    final_truth_offset_px: tuple[float, float] | None
+    final_detector_offset_px: tuple[float, float] | None
+    wall_s: float
+    vehicle_s: float
+    overhead_ms_mean: float | None
+    report_dir: str | None = None
+    error: str | None = None
+    tags: tuple[str, ...] = ()
+    refinement_moves: int = 0
+    """Boundary refinement moves the loop flew after the planner chose "no move" (see centring_loop)."""
+    info: dict[str, Any] = field(default_factory=dict)
+    vehicle_clock_s: dict[str, float] = field(default_factory=dict)
+    files: dict[str, str | None] = field(default_factory=dict)
+    truth_extremes: dict[str, Any] | None = None
+    """Simulated MAVLink vehicles: the largest speeds and excursions from home per simulator truth."""
+    """What the report folder holds: report, trajectory, gif, tlog (None: not written)."""
+    """Milestones (connected, ready, offboard) on the vehicle's clock (PX4 SITL: its simulated time)."""
+
+    @property
+    def final_truth_error_px(self) -> float | None:
+        """max(|du|, |dv|) of the final truth offset: the number ε is compared with."""
+        off = self.final_truth_offset_px
+        return None if off is None else max(abs(off[0]), abs(off[1]))
+
+    def to_json(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["final_truth_error_px"] = self.final_truth_error_px
+        return data
+
+
+def count_steps(steps: list[StepRecord]) -> int:
+    """Steps as the budget counts them: planner decisions plus recovery moves."""
+    return sum(1 for s in steps if s.action is not None or s.event == "recovery")
+
+
+def judge(
+    mission: Mission,
+    outcome: Outcome,
+    steps: int,
+    epsilon_px: float,
+    final_truth_offset_px: tuple[float, float] | None,
+    final_detector_offset_px: tuple[float, float] | None,
+    has_truth: bool,
+) -> list[str]:
+    """Every expectation of `mission` that the flight broke, in words; empty when it passed."""
+    expect = mission.expect
+    failures: list[str] = []
+    if outcome.value != expect.outcome:
+        failures.append(f"outcome {outcome.value}, expected {expect.outcome}")
+    final = final_truth_offset_px if has_truth else final_detector_offset_px
+    source = "truth" if has_truth else "detector"
+    error_px = None if final is None else max(abs(final[0]), abs(final[1]))
+    if expect.outcome == Outcome.CENTRED.value:
+        if error_px is None:
+            failures.append(f"target not in view at the end per {source}")
+        elif error_px > epsilon_px:
+            failures.append(f"final offset {error_px:.1f} px per {source} > ε {epsilon_px:g} px")
+    if expect.max_steps is not None and steps > expect.max_steps:
+        failures.append(f"{steps} steps > the expected at most {expect.max_steps}")
+    if expect.final_offset_px is not None and (error_px is None or error_px > expect.final_offset_px):
+        shown = "none" if error_px is None else f"{error_px:.1f} px"
+        failures.append(f"final offset {shown} per {source} > {expect.final_offset_px:g} px")
+    return failures

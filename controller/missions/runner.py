@@ -1,0 +1,251 @@
+"""Fly one mission: build its vehicle, camera, detector and planner, run the centring loop, write the report.
+
+`run_mission(mission, out_dir)` builds a `FlightKit` for the mission's vehicle:
+
+- `vehicle: sim`: the in-process PyBullet world (`flight.pybullet_backend`) and
+  its rendered camera; truth from the world. Faster than real time.
+- `vehicle: sim-mavlink`: `dronectl sim-vehicle` as a subprocess (the same world
+  served as a PX4-flavoured MAVLink vehicle and an MJPEG stream), flown with the
+  MAVSDK backend and the stream camera exactly as a real drone; truth from the
+  sim's `/truth.json` endpoint, for judging only (`controller.missions.kits.sim_mavlink`).
+- a MAVLink URL: a real vehicle and the `camera` stream URL; no truth.
+
+`fly_kit(kit, mission, out_dir)` then flies: connect → ready → arm → take off →
+(sim: place the drone at the mission's start pose) → zero setpoint → offboard →
+the centring loop → hold → leave offboard → land → disarm. Everything runs
+inside `flight_guard`, so Ctrl-C or any error ends with hold + land, and the
+report (written after every step) keeps every step recorded before it.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from dataclasses import replace
+from pathlib import Path
+
+from controller.missions.kits.base import FlightKit, LoadedModels
+from controller.missions.report import REPORT_JSON, ReportWriter, claim_report_dir, write_setup_failure
+from controller.missions.results import MissionResult, count_steps, judge
+from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission
+from controller.planning.loop import CentringConfig, CentringLoop, Outcome, count_refinements
+from core.centring import default_epsilon_px
+from flight.safe_vehicle import SafeVehicle
+from flight.safety import SafetyLimits, flight_guard
+from flight.signals import StopRequested
+from flight.types import VelocityBody
+from flight.vehicle import Vehicle, wait_for
+
+log = logging.getLogger(__name__)
+
+SETTLED_M_S = 0.15
+SETTLE_TIMEOUT_S = 15.0
+
+
+def epsilon_for(mission: Mission, kit: FlightKit) -> float:
+    """ε for this flight: the kit's (tests fix it), else the mission's, else the default for the width."""
+    return kit.epsilon_px or mission.epsilon_px or default_epsilon_px(kit.image_width_px)
+
+
+def loop_config(mission: Mission, epsilon_px: float, instruction: str) -> CentringConfig:
+    return CentringConfig(
+        epsilon_px=epsilon_px,
+        instruction=instruction,
+        max_steps=mission.max_steps,
+        timeout_s=mission.timeout_s,
+        stop_margin_px=mission.stop_margin_px,
+        **mission.loop.as_kwargs(),
+    )
+
+
+def _take_off_to_start(vehicle: Vehicle, kit: FlightKit, mission: Mission, clock: dict[str, float]) -> None:
+    vehicle.wait_ready()
+    clock["ready_s"] = vehicle.time_s()
+    vehicle.arm()
+    vehicle.takeoff(kit.takeoff_altitude_m or mission.takeoff_altitude_m)
+    if kit.place_at_start is not None:
+        kit.place_at_start()
+    # A takeoff returns near its altitude, still climbing: start the loop from a hover.
+    wait_for(
+        vehicle, lambda t: t.velocity_ned.speed_m_s < SETTLED_M_S, SETTLE_TIMEOUT_S, "takeoff()", "a hover"
+    )
+    vehicle.set_velocity_body(VelocityBody())  # PX4 needs a setpoint before offboard
+    vehicle.start_offboard()
+    clock["offboard_s"] = vehicle.time_s()
+
+
+def fly_kit(
+    kit: FlightKit,
+    mission: Mission,
+    out_dir: str | Path,
+    limits: SafetyLimits | None = None,
+    media: bool = True,
+) -> MissionResult:
+    """Fly the centring loop with `kit` and write the report folder; never loses a recorded step."""
+    out_dir = Path(out_dir)
+    wall_start = time.perf_counter()
+    kit = replace(kit, epsilon_px=epsilon_for(mission, kit))  # ε resolved here, once, for every kit
+    # A kit may bring its vehicle already behind the safety limits (the in-process sim does).
+    vehicle = kit.vehicle if isinstance(kit.vehicle, SafeVehicle) else SafeVehicle(kit.vehicle, limits)
+    header = {
+        "mission": mission.name,
+        "tags": list(mission.tags),
+        "planner": kit.planner.name,
+        "epsilon_px": kit.epsilon_px,
+        "instruction": kit.instruction,
+        "vehicle": mission.vehicle,
+        "camera": mission.camera,
+        "setup": kit.info,
+        "mission_file": mission.model_dump(mode="json"),
+    }
+    loop = CentringLoop(
+        vehicle,
+        kit.camera,
+        kit.detector,
+        kit.planner,
+        loop_config(mission, kit.epsilon_px, kit.instruction),
+        truth_probe=kit.truth_probe,
+    )
+    loop.stop_threshold_px(kit.image_width_px)  # ε against the stopping margin: checked before takeoff
+    writer = ReportWriter(out_dir, header, kit.epsilon_px, media=media)
+    loop.on_step = writer.add_step
+    outcome, message, error = Outcome.ABORTED, "", None
+    vehicle_start_s = vehicle_end_s = 0.0
+    clock: dict[str, float] = {}  # milestones on the vehicle's clock (PX4 SITL's: simulated time)
+    try:
+        vehicle.connect()
+        clock["connected_s"] = vehicle.time_s()
+        with flight_guard(vehicle):
+            _take_off_to_start(vehicle, kit, mission, clock)
+            vehicle_start_s = vehicle.time_s()
+            result = loop.run()
+            outcome, message = result.outcome, result.message
+            vehicle_end_s = vehicle.time_s()
+            vehicle.stop_offboard()
+            vehicle.land()
+            vehicle.disarm()
+    except KeyboardInterrupt as exc:
+        how = str(exc) if isinstance(exc, StopRequested) else "stopped by Ctrl-C"
+        error = message = f"interrupted ({how}); a vehicle in the air was held, then landed"
+        raise
+    except Exception as exc:
+        error = message = f"{type(exc).__name__}: {exc}"
+        log.error("mission %s aborted: %s", mission.name, error)
+    finally:
+        mission_result = _finish(
+            kit, mission, writer, loop, outcome, message, error, time.perf_counter() - wall_start,
+            max(0.0, vehicle_end_s - vehicle_start_s), clock,
+        )  # fmt: skip
+    return mission_result
+
+
+def _finish(
+    kit: FlightKit,
+    mission: Mission,
+    writer: ReportWriter,
+    loop: CentringLoop,
+    outcome: Outcome,
+    message: str,
+    error: str | None,
+    wall_s: float,
+    vehicle_s: float,
+    clock: dict[str, float],
+) -> MissionResult:
+    steps = loop.steps
+    final_truth = steps[-1].truth_offset_px if steps else None
+    final_detector = steps[-1].offset_px if steps else None
+    n_steps = count_steps(steps)
+    failures = judge(
+        mission, outcome, n_steps, kit.epsilon_px, final_truth, final_detector, kit.truth_probe is not None
+    )
+    if error is not None:
+        failures.insert(0, f"error: {error}")
+    summary = {
+        "outcome": outcome.value,
+        "message": message,
+        "passed": not failures,
+        "failures": failures,
+        "steps": n_steps,
+        "moves": sum(1 for s in steps if s.move is not None),
+        "refinement_moves": count_refinements(steps),
+        "stop_threshold_px": steps[-1].stop_threshold_px if steps else None,
+        "final_offset_px": {"truth": final_truth, "detector": final_detector},
+        "wall_s": round(wall_s, 3),
+        "vehicle_s": round(vehicle_s, 3),
+        "vehicle_clock_s": {name: round(value, 3) for name, value in clock.items()},
+        "truth_extremes": kit.truth_extremes() if kit.truth_extremes is not None else None,
+        "error": error,
+    }
+    final = writer.finish(summary, kit.tlog_path)
+    return MissionResult(
+        name=mission.name,
+        planner=kit.planner.name,
+        outcome=outcome.value,
+        passed=not failures,
+        failures=tuple(failures),
+        steps=n_steps,
+        moves=summary["moves"],
+        epsilon_px=kit.epsilon_px,
+        final_truth_offset_px=final_truth,
+        final_detector_offset_px=final_detector,
+        wall_s=wall_s,
+        vehicle_s=vehicle_s,
+        overhead_ms_mean=final["timing"]["overhead_ms_mean"],
+        report_dir=str(writer.out_dir),
+        error=error,
+        tags=mission.tags,
+        info=kit.info,
+        refinement_moves=summary["refinement_moves"],
+        vehicle_clock_s=summary["vehicle_clock_s"],
+        files=final["files"],
+        truth_extremes=summary["truth_extremes"],
+    )
+
+
+@contextmanager
+def open_kit(
+    mission: Mission, out_dir: Path, limits: SafetyLimits | None = None, models: LoadedModels | None = None
+) -> Iterator[FlightKit]:
+    """The mission's components, closed (vehicle, camera, sim subprocess) when the block ends."""
+    with ExitStack() as stack:
+        if mission.vehicle == SIM:
+            from controller.missions.kits.sim import open_sim_kit
+
+            yield stack.enter_context(open_sim_kit(mission, limits, models))
+        elif mission.vehicle == SIM_MAVLINK:
+            from controller.missions.kits.sim_mavlink import open_sim_mavlink_kit
+
+            yield stack.enter_context(open_sim_mavlink_kit(mission, out_dir, models))
+        elif mission.vehicle == PX4_SITL:
+            from controller.missions.kits.px4_sitl import open_px4_sitl_kit
+
+            yield stack.enter_context(open_px4_sitl_kit(mission, out_dir, models))
+        else:
+            from controller.missions.kits.real import open_real_kit
+
+            yield stack.enter_context(open_real_kit(mission, out_dir, models))
+
+
+def run_mission(
+    mission: Mission,
+    out_dir: str | Path,
+    limits: SafetyLimits | None = None,
+    media: bool = True,
+    models: LoadedModels | None = None,
+) -> MissionResult:
+    """Build the mission's kit, fly it and write the report folder `out_dir` (`media`: plot and GIF too).
+
+    `out_dir` must not exist or be empty: a report is never written over another
+    (`ReportFolderError`). A mission that cannot start (a bad checkpoint, a camera that
+    does not open, a simulator that fails) still leaves a report saying why, then raises.
+    """
+    out_dir = claim_report_dir(out_dir)
+    try:
+        with open_kit(mission, out_dir, limits, models) as kit:
+            return fly_kit(kit, mission, out_dir, limits, media)
+    except BaseException as exc:
+        if not (out_dir / REPORT_JSON).exists():  # it failed before the flight's own report began
+            write_setup_failure(out_dir, mission, exc)
+        raise

@@ -1,0 +1,401 @@
+"""The mission file: one centring flight, what it starts from and what must hold at the end.
+
+A mission is a YAML file validated on load (pydantic, unknown keys refused). A bad
+file is refused with a `MissionFileError` that names the file and the field
+(`missions/x.yaml: start.distance_m: Input should be greater than 0`), never with a
+traceback from inside pydantic or PyYAML.
+
+```yaml
+name: sector-ne                  # required; used for the report folder
+tags: [sector, quick]
+scene: {seed: 1001}              # or {config: scenes/x.yaml, seed: 3}, or {config: {...inline...}, seed: 3}
+target_kind: gauge               # gauge | valve | switchbox | null (the scene draws one)
+start: {right_m: -0.5, up_m: -0.4, distance_m: 2.0, yaw_deg: 0}   # drone pose relative to the centred pose
+# start: {random: {seed: 7, view_fraction: [0.2, 0.8], distance_m: [1.6, 2.6], yaw_deg: [-8, 8]}}
+instruction: center the gauge
+vehicle: sim                     # sim | sim-mavlink | px4-sitl | a MAVLink URL (udpin://0.0.0.0:14540, serial:///dev/ttyACM0:57600)
+camera: sim                      # sim | a stream URL (http://host:8080/stream.mjpg, rtsp://...)
+planner: latent                  # latent | classic | random | oracle
+checkpoint: null                 # null: the shipped one
+detector: image                  # image | truth (in-process sim only, for debugging)
+epsilon_px: null                 # null: default_epsilon_px(image width)
+stop_margin_px: null             # stop at ε − this per detector; null: 2 px at 224 px width, scaled
+max_steps: 20
+timeout_s: 120
+wind: {mean_enu_m_s: [0.3, 0, 0], gust_std_m_s: 0.2}
+loop: {max_move_m: 1.0}          # CentringConfig overrides (move scheme, refinement budget, ...)
+expect: {outcome: centred, max_steps: 12, final_offset_px: 10}
+px4: {instance: auto, speed: 1.0}  # vehicle: px4-sitl only (the PX4 folder: --px4 or $PX4_SITL_DIR)
+```
+
+`start` is the drone's pose relative to the pose that centres the target (in front
+of it, looking at the wall): `right_m` > 0 puts the drone to the right of that pose, so
+the target appears left of the image centre. A random start draws the target's
+image position as a fraction of the half view (`view_fraction`, in any direction),
+so a random start always has the target in view.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    Tag,
+    field_validator,
+    model_validator,
+)
+
+from core.config_files import ConfigFileError, Range, read_yaml, validate_mapping
+from flight.errors import ConnectionUrlError
+from flight.urls import validate_connection_url
+
+PlannerName = Literal["latent", "classic", "random", "oracle"]
+PLANNER_NAMES: tuple[str, ...] = ("latent", "classic", "random", "oracle")
+TargetKindName = Literal["gauge", "valve", "switchbox"]
+DetectorName = Literal["image", "truth"]
+OutcomeName = Literal["centred", "max_steps", "timeout", "target_lost", "planner_stalled"]
+
+SIM = "sim"
+SIM_MAVLINK = "sim-mavlink"
+PX4_SITL = "px4-sitl"
+SIMULATED_VEHICLES = (SIM, SIM_MAVLINK, PX4_SITL)
+_MAVLINK_SCHEMES = ("udp://", "udpin://", "udpout://", "tcp://", "tcpin://", "tcpout://", "serial://")
+_STREAM_SCHEMES = ("http://", "https://", "rtsp://", "file://")
+
+
+class MissionFileError(ConfigFileError):
+    """A mission file that cannot be flown; the message names the file and the field."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class SceneSpec(_Strict):
+    """Which scene: a scene config (a YAML path, an inline mapping, or null for the default) and a seed."""
+
+    config: str | dict[str, Any] | None = None
+    seed: int = Field(default=0, ge=0)
+
+
+class StartOffset(_Strict):
+    """A fixed start: the drone's offset from the centred pose, in metres and degrees."""
+
+    right_m: float = Field(default=0.0, ge=-3.0, le=3.0)
+    up_m: float = Field(default=0.0, ge=-2.0, le=2.0)
+    distance_m: float = Field(default=2.0, gt=0.5, le=6.0)
+    yaw_deg: float = Field(default=0.0, ge=-30.0, le=30.0)
+
+
+class RandomStart(_Strict):
+    """A seeded random start: the target's image position as a fraction of the half view, any direction."""
+
+    seed: int = Field(ge=0)
+    view_fraction: Range = (0.15, 0.8)
+    distance_m: Range = (1.6, 2.6)
+    yaw_deg: Range = (-8.0, 8.0)
+
+    @field_validator("view_fraction")
+    @classmethod
+    def _inside_the_view(cls, value: tuple[float, float]) -> tuple[float, float]:
+        if not (value[0] >= 0.0 and value[1] < 1.0):
+            raise ValueError(f"must lie within [0, 1), got {list(value)}")
+        return value
+
+    @field_validator("distance_m")
+    @classmethod
+    def _off_the_wall(cls, value: tuple[float, float]) -> tuple[float, float]:
+        if value[0] <= 0.5:
+            raise ValueError(f"must stay above 0.5 m, got {list(value)}")
+        return value
+
+    def draw(self, hfov_deg: float, vfov_deg: float) -> StartOffset:
+        """The start offset this seed gives, for a level camera with these fields of view.
+
+        The target is put at image position (fu, fv) (fractions of the half width and
+        height; u right, v down) from a drone `distance` from the wall, yawed `yaw`
+        clockwise: the target's bearing from the wall normal is the bearing in the
+        image plus the yaw, and its height offset scales with the depth along the
+        optical axis.
+        """
+        rng = np.random.default_rng(self.seed)
+        fraction = rng.uniform(*self.view_fraction)
+        angle = rng.uniform(0.0, 2.0 * math.pi)
+        distance = rng.uniform(*self.distance_m)
+        yaw = rng.uniform(*self.yaw_deg)
+        fu, fv = fraction * math.cos(angle), fraction * math.sin(angle)
+        bearing = math.atan(fu * math.tan(math.radians(hfov_deg) / 2.0))  # in the image, right positive
+        depth = distance * math.cos(bearing) / math.cos(bearing + math.radians(yaw))  # along the optical axis
+        right_m = -distance * math.tan(bearing + math.radians(yaw))
+        up_m = fv * depth * math.tan(math.radians(vfov_deg) / 2.0)
+        return StartOffset(right_m=right_m, up_m=up_m, distance_m=distance, yaw_deg=yaw)
+
+
+class RandomStartSpec(_Strict):
+    random: RandomStart
+
+
+def _start_form(value: object) -> str:
+    random = isinstance(value, RandomStartSpec) or (isinstance(value, dict) and "random" in value)
+    return "random-start" if random else "fixed-start"
+
+
+Start = Annotated[
+    Annotated[StartOffset, Tag("fixed-start")] | Annotated[RandomStartSpec, Tag("random-start")],
+    Discriminator(_start_form),
+]
+"""Either a fixed offset or `{random: {...}}`; errors are reported for the form that was written."""
+
+
+class WindSpec(_Strict):
+    """Wind for the simulated world (ENU m/s); ignored, with a warning, for a real vehicle."""
+
+    mean_enu_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gust_std_m_s: float = Field(default=0.0, ge=0.0, le=5.0)
+    gust_time_constant_s: float = Field(default=2.0, gt=0.0)
+
+
+class LoopOverrides(_Strict):
+    """Overrides of `controller.planning.loop.CentringConfig` (unset fields keep its defaults)."""
+
+    move_m: float | None = Field(default=None, gt=0.0, le=2.0)
+    min_move_m: float | None = Field(default=None, gt=0.0, le=2.0)
+    shrink: float | None = Field(default=None, gt=0.0, le=1.0)
+    speed_m_s: float | None = Field(default=None, gt=0.0, le=2.0)
+    settle_s: float | None = Field(default=None, ge=0.0, le=5.0)
+    max_stalls: int | None = Field(default=None, ge=1, le=20)
+    lost_recoveries: int | None = Field(default=None, ge=0, le=5)
+    max_refinements: int | None = Field(default=None, ge=0, le=20)
+    scale_moves: bool | None = None
+    max_move_m: float | None = Field(default=None, gt=0.0, le=3.0)
+    move_gain: float | None = Field(default=None, gt=0.0, le=2.0)
+    assumed_distance_m: float | None = Field(default=None, gt=0.0, le=20.0)
+    hfov_deg: float | None = Field(default=None, gt=0.0, lt=180.0)
+
+    def as_kwargs(self) -> dict[str, Any]:
+        return {k: v for k, v in self.model_dump().items() if v is not None}
+
+
+class Expectations(_Strict):
+    """What must hold when the loop ends; an unset limit is not checked.
+
+    With `outcome: centred` (the default) the target must also end within ε of the
+    image centre per simulator truth (per the detector where there is no truth).
+    """
+
+    outcome: OutcomeName = "centred"
+    max_steps: int | None = Field(default=None, ge=0)
+    final_offset_px: float | None = Field(default=None, gt=0.0)
+    """The final truth offset, max(|du|, |dv|), must not exceed this."""
+
+
+class PortSpec(_Strict):
+    """Ports for a `sim-mavlink` mission (the suite assigns distinct ones to parallel missions)."""
+
+    mavlink_udp: int = Field(default=14840, ge=1024, le=65535)
+    http: int = Field(default=18840, ge=1024, le=65535)
+
+
+class Px4Spec(_Strict):
+    """How a `px4-sitl` mission runs PX4 SITL (see `sim_world.px4_bridge`)."""
+
+    dir: str | None = None
+    """PX4 SITL build folder; None: the `--px4` option, else $PX4_SITL_DIR."""
+    instance: int | Literal["auto"] = "auto"
+    """PX4 instance 0..9 (ports 4560+N, 14540+N); "auto": the lowest one no other run holds."""
+    speed: float | Literal["max"] = 1.0
+    """Simulated seconds per wall second, or "max" (lockstep as fast as it goes; benchmarks)."""
+    noise: float = Field(default=1.0, gt=0.0, le=10.0)
+    """Scale of every sensor noise and bias (PX4 refuses perfectly constant sensors: > 0)."""
+    keep_ulog: bool = True
+    """Copy PX4's .ulg flight log into the report folder (`px4/`); ~4 MB per 20 s."""
+    params: dict[str, float] = Field(default_factory=dict)
+    """PX4 parameters set at boot (`MPC_XY_VEL_MAX: 1.0`)."""
+
+    @field_validator("instance")
+    @classmethod
+    def _instance_range(cls, value: int | str) -> int | str:
+        if isinstance(value, int) and not 0 <= value <= 9:
+            raise ValueError(f"must be 0..9 or 'auto', got {value}")
+        return value
+
+    @field_validator("speed")
+    @classmethod
+    def _speed_range(cls, value: float | str) -> float | str:
+        if isinstance(value, float) and not 0.05 <= value <= 100.0:
+            raise ValueError(f"must be in [0.05, 100] or 'max', got {value:g}")
+        return value
+
+
+class LinkFaultSpec(_Strict):
+    """A bad MAVLink link between the controller and the vehicle (see `flight.link_faults`)."""
+
+    loss: float = Field(default=0.0, ge=0.0, lt=1.0)
+    latency_ms: float = Field(default=0.0, ge=0.0, le=5000.0)
+    jitter_ms: float = Field(default=0.0, ge=0.0, le=5000.0)
+    duplicate: float = Field(default=0.0, ge=0.0, lt=1.0)
+    reorder: float = Field(default=0.0, ge=0.0, lt=1.0)
+
+
+class CameraFaultSpec(_Strict):
+    """A bad camera at its source (`sim_world.rendering.video.VideoFaults`); times: simulated s from boot."""
+
+    drop: float = Field(default=0.0, ge=0.0, lt=1.0)
+    freeze_at_s: float | None = Field(default=None, ge=0.0)
+    freeze_for_s: float = Field(default=3.0, gt=0.0)
+    dies_at_s: float | None = Field(default=None, ge=0.0)
+
+
+class FaultSpec(_Strict):
+    """Faults injected on purpose, to see how a mission degrades; all off by default."""
+
+    link: LinkFaultSpec | None = None
+    camera: CameraFaultSpec | None = None
+    gust_m_s: float = Field(default=0.0, ge=0.0, le=10.0)
+    """Gusts (the wind's standard deviation per axis, m/s) in a simulated world."""
+    vehicle_dies_at_s: float | None = Field(default=None, ge=0.0)
+    """The simulated vehicle (sim-vehicle, or PX4 itself) is killed at this simulated time from boot."""
+    seed: int = Field(default=0, ge=0)
+
+    @property
+    def any(self) -> bool:
+        return bool(self.link or self.camera or self.gust_m_s or self.vehicle_dies_at_s is not None)
+
+
+class Mission(_Strict):
+    """One centring mission."""
+
+    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
+    tags: tuple[str, ...] = ()
+    description: str = ""
+    scene: SceneSpec = SceneSpec()
+    target_kind: TargetKindName | None = None
+    start: Start = StartOffset()
+    instruction: str | None = None
+    """None: "center the <target kind>"."""
+    vehicle: str = SIM
+    camera: str = SIM
+    planner: PlannerName = "latent"
+    checkpoint: str | None = None
+    detector: DetectorName = "image"
+    """`image`: the image detector (what a real drone has); `truth`: simulator truth (debugging only)."""
+    detector_checkpoint: str | None = None
+    """None: the image detector's shipped weights."""
+    epsilon_px: float | None = Field(default=None, gt=0.0)
+    stop_margin_px: float | None = Field(default=None, ge=0.0)
+    """The loop stops at ε − this per detector (None: 2 px at 224 px width, scaled); must be < ε."""
+    max_steps: int = Field(default=20, ge=1, le=500)
+    timeout_s: float = Field(default=120.0, gt=0.0)
+    takeoff_altitude_m: float = Field(default=1.5, gt=0.3, le=4.0)
+    wind: WindSpec | None = None
+    loop: LoopOverrides = LoopOverrides()
+    expect: Expectations = Expectations()
+    ports: PortSpec = PortSpec()
+    px4: Px4Spec = Px4Spec()
+    faults: FaultSpec = FaultSpec()
+
+    @model_validator(mode="after")
+    def _links(self) -> Mission:
+        if (
+            self.stop_margin_px is not None
+            and self.epsilon_px is not None
+            and self.stop_margin_px >= self.epsilon_px
+        ):
+            raise ValueError(
+                f"stop_margin_px: {self.stop_margin_px:g} must be smaller than epsilon_px {self.epsilon_px:g}"
+            )
+        if self.vehicle not in SIMULATED_VEHICLES and not self.vehicle.startswith(_MAVLINK_SCHEMES):
+            raise ValueError(
+                f"vehicle: {self.vehicle!r} is neither 'sim', 'sim-mavlink', 'px4-sitl' nor a MAVLink URL "
+                f"({', '.join(s + '...' for s in _MAVLINK_SCHEMES)})"
+            )
+        if self.is_real:
+            try:
+                validate_connection_url(self.vehicle)
+            except ConnectionUrlError as exc:
+                raise ValueError(f"vehicle: {exc.detail}") from None
+        if self.camera != SIM and not self.camera.startswith(_STREAM_SCHEMES):
+            raise ValueError(
+                f"camera: {self.camera!r} is neither 'sim' nor a stream URL "
+                f"({', '.join(s + '...' for s in _STREAM_SCHEMES)})"
+            )
+        if self.is_real and self.camera == SIM:
+            raise ValueError("camera: a real vehicle needs a stream URL, not 'sim'")
+        if not self.is_real and self.camera != SIM:
+            raise ValueError(
+                f"camera: the simulated vehicle {self.vehicle!r} streams its own camera; use camera: sim "
+                "(a camera URL goes with a real vehicle's MAVLink URL)"
+            )
+        if self.is_real and self.detector == "truth":
+            raise ValueError("detector: 'truth' needs the simulator; a real vehicle uses the image detector")
+        if self.vehicle != SIM and self.detector == "truth":
+            raise ValueError("detector: 'truth' is available in the in-process sim only (vehicle: sim)")
+        if self.vehicle not in (SIM, PX4_SITL) and self.wind is not None:
+            raise ValueError("wind: only the simulated worlds of 'sim' and 'px4-sitl' simulate wind")
+        mavlink_sim = self.vehicle in (SIM_MAVLINK, PX4_SITL)
+        if self.faults.link is not None and not (mavlink_sim or self.vehicle.startswith("udpin://")):
+            raise ValueError(
+                "faults.link: needs a relayed MAVLink link: sim-mavlink, px4-sitl or a udpin:// URL"
+            )
+        if (self.faults.camera is not None or self.faults.vehicle_dies_at_s is not None) and not mavlink_sim:
+            raise ValueError(
+                "faults: camera faults and a dying vehicle are simulated by sim-mavlink and px4-sitl only"
+            )
+        if self.faults.gust_m_s and self.is_real:
+            raise ValueError("faults.gust_m_s: only a simulated world has wind to make gusty")
+        if self.vehicle != PX4_SITL and "px4" in self.model_fields_set:
+            raise ValueError(f"px4: only a 'px4-sitl' mission runs PX4 SITL (vehicle is {self.vehicle!r})")
+        if self.is_real and self.planner == "oracle":
+            raise ValueError("planner: 'oracle' needs simulator truth, which a real vehicle does not have")
+        return self
+
+    @property
+    def is_real(self) -> bool:
+        """Flown on a vehicle at a URL: no simulator, no truth."""
+        return self.vehicle not in SIMULATED_VEHICLES
+
+    def with_seed(self, seed: int) -> Mission:
+        """The same mission in scene `seed` (a random start is redrawn from the same seed)."""
+        update: dict[str, Any] = {"scene": self.scene.model_copy(update={"seed": seed})}
+        if isinstance(self.start, RandomStartSpec):
+            update["start"] = RandomStartSpec(random=self.start.random.model_copy(update={"seed": seed}))
+        return self.model_copy(update=update)
+
+    def instruction_text(self, target_kind: str | None) -> str:
+        return self.instruction or f"center the {target_kind or 'target'}"
+
+
+_UNNAMED = ("fixed-start", "random-start")  # the `start` union's tags: not fields
+
+
+def parse_mission(
+    data: object, source: str | Path = "<mission>", overrides: dict[str, Any] | None = None
+) -> Mission:
+    """Validate a parsed mapping (with top-level `overrides` applied); errors name `source` and the field."""
+    if not isinstance(data, dict):
+        kind = type(data).__name__
+        raise MissionFileError(source, None, f"expected a mapping at the top level, got {kind}")
+    return validate_mapping(Mission, {**data, **(overrides or {})}, source, MissionFileError, _UNNAMED)
+
+
+def load_mission(path: str | Path, overrides: dict[str, Any] | None = None) -> Mission:
+    """Read and validate a mission YAML file (see the module docstring for its fields)."""
+    path = Path(path)
+    data = read_yaml(path, MissionFileError)
+    mission = parse_mission(data, path)  # the file alone first: its own errors name the file
+    if overrides:  # then the command line's changes, whose errors name the command line
+        mission = parse_mission(data, f"command-line options over {path}", overrides)
+    if isinstance(mission.scene.config, str) and not Path(mission.scene.config).is_absolute():
+        # A scene file is found relative to the mission file, so a suite folder can be moved as a whole.
+        resolved = (path.parent / mission.scene.config).resolve()
+        mission = mission.model_copy(
+            update={"scene": mission.scene.model_copy(update={"config": str(resolved)})}
+        )
+    return mission

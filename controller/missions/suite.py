@@ -1,0 +1,244 @@
+"""A mission suite: every mission of a folder, flown (in parallel if asked), as a table and JUnit XML.
+
+All mission files are validated before the first flight, so a typo fails the
+suite at once. Each mission writes its report folder under `report_dir/<name>/`.
+Missions that fly through `sim-vehicle` get their own UDP and HTTP ports from the
+suite's port ranges (one slot per mission), so parallel ones never collide.
+A mission that cannot even start (bad URL, missing checkpoint) is a failed row,
+not a crashed suite.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+import xml.etree.ElementTree as ET
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+from controller.missions.report import claim_report_dir
+from controller.missions.results import MissionResult
+from controller.missions.schema import (
+    PX4_SITL,
+    SIM_MAVLINK,
+    Mission,
+    MissionFileError,
+    PortSpec,
+    load_mission,
+)
+
+log = logging.getLogger(__name__)
+
+UDP_PORTS_PER_MISSION = 4  # sim-vehicle bind, its send-to (the tlog proxy), MAVSDK's, one spare
+
+
+@dataclass(frozen=True)
+class SuiteOptions:
+    """How to run a suite. Ports: slot i uses UDP `udp_port_base + 4i ...` and HTTP `http_port_base + i`."""
+
+    report_dir: Path
+    parallel: int = 1
+    overrides: dict[str, Any] | None = None
+    tags: tuple[str, ...] = ()
+    """Fly only missions with at least one of these tags (empty: all)."""
+    exclude_tags: tuple[str, ...] = ()
+    udp_port_base: int = 14800
+    http_port_base: int = 18800
+    max_slots: int = 25
+    px4_dir: str | None = None
+    """The PX4 SITL folder for `px4-sitl` missions that name none (None: $PX4_SITL_DIR)."""
+
+    def __post_init__(self) -> None:
+        if self.parallel < 1:
+            raise ValueError(f"parallel must be >= 1, got {self.parallel}")
+
+    def ports(self, slot: int) -> PortSpec:
+        return PortSpec(
+            mavlink_udp=self.udp_port_base + UDP_PORTS_PER_MISSION * (slot % self.max_slots),
+            http=self.http_port_base + slot % self.max_slots,
+        )
+
+
+@dataclass(frozen=True)
+class SuiteResult:
+    results: list[MissionResult]
+    wall_s: float
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.results) and all(r.passed for r in self.results)
+
+    @property
+    def failed(self) -> list[MissionResult]:
+        return [r for r in self.results if not r.passed]
+
+
+def _fly_one(mission: Mission, out_dir: Path, threads: int) -> MissionResult:
+    """One mission in a worker (or in this process); never raises for a mission that fails."""
+    from controller.missions.runner import run_mission
+
+    if threads:
+        import torch
+
+        torch.set_num_threads(threads)
+    start = time.perf_counter()
+    try:
+        return run_mission(mission, out_dir)
+    except Exception as exc:  # could not start: a failed row with the reason
+        log.error("mission %s could not fly: %s", mission.name, exc)
+        return failed_to_start(mission, f"{type(exc).__name__}: {exc}", time.perf_counter() - start)
+
+
+def find_mission_files(directory: str | Path) -> list[Path]:
+    """The mission files (`*.yaml`, `*.yml`) of a suite folder, sorted; errors name the folder."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise MissionFileError(directory, None, "not a folder of mission files")
+    files = sorted(p for p in directory.iterdir() if p.suffix in (".yaml", ".yml") and p.is_file())
+    if not files:
+        raise MissionFileError(directory, None, "no mission files (*.yaml) in this folder")
+    return files
+
+
+def load_suite(directory: str | Path, overrides: dict[str, Any] | None = None) -> list[tuple[Path, Mission]]:
+    """Load and validate every mission of a folder before flying any (a bad file fails the suite early)."""
+    missions = [(path, load_mission(path, overrides)) for path in find_mission_files(directory)]
+    names = [m.name for _, m in missions]
+    duplicates = sorted({n for n in names if names.count(n) > 1})
+    if duplicates:
+        raise MissionFileError(directory, "name", f"mission names must be unique, repeated: {duplicates}")
+    return missions
+
+
+def failed_to_start(mission: Mission, error: str, wall_s: float) -> MissionResult:
+    return MissionResult(
+        name=mission.name,
+        planner=mission.planner,
+        outcome="error",
+        passed=False,
+        failures=(f"error: {error}",),
+        steps=0,
+        moves=0,
+        epsilon_px=mission.epsilon_px or 0.0,
+        final_truth_offset_px=None,
+        final_detector_offset_px=None,
+        wall_s=wall_s,
+        vehicle_s=0.0,
+        overhead_ms_mean=None,
+        error=error,
+        tags=mission.tags,
+    )
+
+
+def assign_ports(missions: list[Mission], options: SuiteOptions) -> list[Mission]:
+    """Give every sim-vehicle mission its own port slot, and px4-sitl missions the suite's PX4 folder.
+
+    (A px4-sitl mission's ports follow its PX4 instance, which each run locks for itself.)
+    """
+    out, slot = [], 0
+    for mission in missions:
+        if mission.vehicle == SIM_MAVLINK:
+            mission = mission.model_copy(update={"ports": options.ports(slot)})
+            slot += 1
+        if mission.vehicle == PX4_SITL and mission.px4.dir is None and options.px4_dir is not None:
+            mission = mission.model_copy(
+                update={"px4": mission.px4.model_copy(update={"dir": options.px4_dir})}
+            )
+        out.append(mission)
+    return out
+
+
+def _selected(mission: Mission, options: SuiteOptions) -> bool:
+    tags = set(mission.tags)
+    return (not options.tags or bool(tags & set(options.tags))) and not tags & set(options.exclude_tags)
+
+
+def run_suite(directory: str | Path, options: SuiteOptions) -> SuiteResult:
+    """Validate, then fly every mission of `directory`; results in file order."""
+    start = time.perf_counter()
+    selected = [path for path, m in load_suite(directory) if _selected(m, options)]
+    missions = [load_mission(path, options.overrides) for path in selected]  # overrides on the chosen only
+    if not missions:
+        raise ValueError(
+            f"no mission in {directory} matches tags {options.tags} minus {options.exclude_tags}"
+        )
+    missions = assign_ports(missions, options)
+    out = claim_report_dir(options.report_dir)  # a suite's reports never go over an earlier run's
+    results: dict[str, MissionResult] = {}
+    if options.parallel == 1:
+        for mission in missions:
+            results[mission.name] = _fly_one(mission, out / mission.name, threads=0)
+            _log_row(results[mission.name])
+    else:
+        with ProcessPoolExecutor(options.parallel, mp_context=get_context("spawn")) as pool:
+            futures = {pool.submit(_fly_one, m, out / m.name, 1): m for m in missions}
+            for future in as_completed(futures):
+                result = future.result()
+                results[result.name] = result
+                _log_row(result)
+    return SuiteResult([results[m.name] for m in missions], time.perf_counter() - start)
+
+
+def _log_row(result: MissionResult) -> None:
+    log.info(
+        "%s %s: %s in %d steps",
+        "PASS" if result.passed else "FAIL",
+        result.name,
+        result.outcome,
+        result.steps,
+    )
+
+
+def format_table(suite: SuiteResult) -> str:
+    """A fixed-width table: one row per mission, then a summary line."""
+    columns = (
+        ("mission", 28, "<"),
+        ("planner", 8, "<"),
+        ("result", 6, "<"),
+        ("outcome", 16, "<"),
+        ("steps", 5, ">"),
+    )
+    header = (
+        " ".join(f"{name:{align}{width}}" for name, width, align in columns)
+        + f" {'refine':>6} {'offset px':>9} {'wall s':>7}"
+    )
+    lines = [header, "-" * len(header)]
+    for r in suite.results:
+        error = r.final_truth_error_px
+        offset = "-" if error is None else f"{error:.1f}"
+        lines.append(
+            f"{r.name[:28]:<28} {r.planner:<8} {'PASS' if r.passed else 'FAIL':<6} {r.outcome:<16} "
+            f"{r.steps:>5} {r.refinement_moves:>6} {offset:>9} {r.wall_s:>7.1f}"
+        )
+        lines += [f"    - {failure}" for failure in r.failures]
+    passed = sum(r.passed for r in suite.results)
+    lines.append(f"{passed}/{len(suite.results)} passed in {suite.wall_s:.1f} s")
+    return "\n".join(lines)
+
+
+def write_junit(suite: SuiteResult, path: str | Path, name: str = "missions") -> None:
+    """JUnit XML (one testcase per mission) for CI systems."""
+    failures = len(suite.failed)
+    root = ET.Element(
+        "testsuite", name=name, tests=str(len(suite.results)), failures=str(failures), errors="0",
+        time=f"{suite.wall_s:.3f}",
+    )  # fmt: skip
+    for r in suite.results:
+        case = ET.SubElement(
+            root, "testcase", classname=f"missions.{r.planner}", name=r.name, time=f"{r.wall_s:.3f}"
+        )
+        if not r.passed:
+            failure = ET.SubElement(case, "failure", message="; ".join(r.failures)[:500], type=r.outcome)
+            failure.text = "\n".join(r.failures)
+        out = ET.SubElement(case, "system-out")
+        offset = r.final_truth_offset_px
+        out.text = (
+            f"outcome={r.outcome} steps={r.steps} refinement_moves={r.refinement_moves} "
+            f"final_offset_px={offset} report={r.report_dir}"
+        )
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)

@@ -1,0 +1,159 @@
+"""Checkpoint folder: `model.safetensors` + `config.json` + `vocab.txt`/`tokenizer.json`.
+
+The safetensors file holds every model tensor, the stored goal image mean
+`goal_image_embedding` (d,) and `probe_distances` (2, 9): the model's own output on
+a fixed, deterministic probe input, recorded at save time. Loading never executes
+code (JSON + safetensors only) and checks, in order: files present, config valid,
+tensor names and shapes as the config implies, the image size recorded in the
+safetensors metadata against the config's, vocabulary size, and that the weights
+reproduce the probe output. Every failure is
+a `CheckpointError` naming the file.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+from safetensors import SafetensorError, safe_open
+from safetensors.torch import load_file, save_file
+
+from controller.planning.latent.config import GOAL_PROTOTYPE_RULE, ModelConfig
+from controller.planning.latent.errors import CheckpointError
+from controller.planning.latent.model import LatentDynamicsModel
+from controller.planning.latent.tokenizer import VOCAB_FILE, InstructionTokenizer
+
+WEIGHTS_FILE = "model.safetensors"
+CONFIG_FILE = "config.json"
+FORMAT = "drone-inspect/latent-planner/1"
+GOAL_KEY = "goal_image_embedding"
+PROBE_KEY = "probe_distances"
+PROBE_INSTRUCTIONS = ("center the gauge in the camera view.", "please center the valve.")
+PROBE_TOLERANCE = 1e-3
+
+
+@dataclass
+class LoadedCheckpoint:
+    model: LatentDynamicsModel  # in eval mode
+    tokenizer: InstructionTokenizer
+    goal_image_embedding: torch.Tensor  # (d,)
+    config: ModelConfig
+    meta: dict[str, Any]  # everything else in config.json (training settings, metrics, ε)
+
+
+def probe_input(config: ModelConfig, tokenizer: InstructionTokenizer) -> tuple[torch.Tensor, torch.Tensor]:
+    """A deterministic (2, 3, S, S) seeded-noise image batch and its instruction ids."""
+    s = config.image_size
+    images = torch.rand(2, 3, s, s, generator=torch.Generator().manual_seed(1234))
+    return images, tokenizer.batch(list(PROBE_INSTRUCTIONS))
+
+
+@torch.inference_mode()
+def probe_distances(
+    model: LatentDynamicsModel, tokenizer: InstructionTokenizer, goal: torch.Tensor
+) -> torch.Tensor:
+    model.eval()
+    images, ids = probe_input(model.config, tokenizer)
+    return model(images, ids, goal)  # (2, 9)
+
+
+def save_checkpoint(
+    folder: Path,
+    model: LatentDynamicsModel,
+    tokenizer: InstructionTokenizer,
+    goal_image_embedding: torch.Tensor,
+    meta: dict[str, Any] | None = None,
+) -> None:
+    """Write the checkpoint folder (created if needed); `meta` goes into config.json beside the model."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    goal = goal_image_embedding.detach().reshape(-1).contiguous().float()
+    tensors = {k: v.detach().contiguous() for k, v in model.state_dict().items()}
+    tensors[GOAL_KEY] = goal
+    tensors[PROBE_KEY] = probe_distances(model, tokenizer, goal).contiguous()
+    metadata = {"format": FORMAT, "image_size": str(model.config.image_size)}
+    save_file(tensors, str(folder / WEIGHTS_FILE), metadata=metadata)
+    tokenizer.save(folder)
+    body = {"format": FORMAT, "model": model.config.to_dict(), "goal_prototype": GOAL_PROTOTYPE_RULE}
+    body.update(meta or {})
+    (folder / CONFIG_FILE).write_text(json.dumps(body, indent=2, sort_keys=False) + "\n")
+
+
+def load_checkpoint(folder: Path) -> LoadedCheckpoint:
+    """Load and verify a checkpoint folder (see the module docstring for the checks)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise CheckpointError(f"checkpoint folder not found: {folder}")
+    for name in (CONFIG_FILE, WEIGHTS_FILE, VOCAB_FILE):
+        if not (folder / name).is_file():
+            raise CheckpointError(f"checkpoint file missing: {folder / name}")
+    config, meta = _read_config(folder / CONFIG_FILE)
+    tokenizer = InstructionTokenizer.load(folder, config.max_tokens)
+    if tokenizer.vocab_size != config.vocab_size:
+        raise CheckpointError(
+            f"{folder / VOCAB_FILE} has {tokenizer.vocab_size} tokens but {folder / CONFIG_FILE} "
+            f"says vocab_size={config.vocab_size}"
+        )
+    weights_path = folder / WEIGHTS_FILE
+    try:
+        with safe_open(str(weights_path), framework="pt") as f:
+            stored_size = (f.metadata() or {}).get("image_size")
+        tensors = load_file(str(weights_path))
+    except (SafetensorError, OSError, ValueError) as exc:
+        raise CheckpointError(
+            f"cannot read {weights_path}: corrupt or not a safetensors file ({exc})"
+        ) from exc
+    if stored_size != str(config.image_size):
+        raise CheckpointError(
+            f"{weights_path} was trained at image_size={stored_size} but {folder / CONFIG_FILE} says "
+            f"image_size={config.image_size}"
+        )
+    model = LatentDynamicsModel(config)
+    expected = {k: tuple(v.shape) for k, v in model.state_dict().items()}
+    expected[GOAL_KEY] = (config.latent_dim,)
+    expected[PROBE_KEY] = (len(PROBE_INSTRUCTIONS), 9)
+    _check_shapes(tensors, expected, weights_path)
+    goal, probe = tensors.pop(GOAL_KEY), tensors.pop(PROBE_KEY)
+    if not all(bool(torch.isfinite(t).all()) for t in (*tensors.values(), goal)):
+        raise CheckpointError(f"{weights_path} holds non-finite values (NaN or inf)")
+    model.load_state_dict(tensors, strict=True)
+    model.eval()
+    got = probe_distances(model, tokenizer, goal)
+    if not torch.allclose(got, probe, rtol=PROBE_TOLERANCE, atol=PROBE_TOLERANCE):
+        raise CheckpointError(
+            f"{weights_path} does not reproduce its recorded probe output at image_size="
+            f"{config.image_size} (max error {float((got - probe).abs().max()):.3g}): the weights, the "
+            f"vocabulary or {folder / CONFIG_FILE} were changed after saving"
+        )
+    return LoadedCheckpoint(model, tokenizer, goal, config, meta)
+
+
+def _read_config(path: Path) -> tuple[ModelConfig, dict[str, Any]]:
+    try:
+        body = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CheckpointError(f"cannot parse {path}: {exc}") from exc
+    if not isinstance(body, dict) or body.get("format") != FORMAT:
+        raise CheckpointError(f"{path}: not a latent-planner checkpoint config (format != {FORMAT!r})")
+    try:
+        config = ModelConfig.from_dict(body.pop("model"))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise CheckpointError(f"{path}: invalid 'model' section ({exc})") from exc
+    return config, body
+
+
+def _check_shapes(tensors: dict[str, torch.Tensor], expected: dict[str, tuple[int, ...]], path: Path) -> None:
+    missing = sorted(set(expected) - set(tensors))
+    unexpected = sorted(set(tensors) - set(expected))
+    if missing or unexpected:
+        raise CheckpointError(
+            f"{path} does not match its config: missing tensors {missing[:5]}, unexpected {unexpected[:5]}"
+        )
+    for name, shape in expected.items():
+        if tuple(tensors[name].shape) != shape:
+            raise CheckpointError(
+                f"{path}: tensor {name!r} has shape {tuple(tensors[name].shape)}, the config implies {shape}"
+            )

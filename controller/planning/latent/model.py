@@ -1,0 +1,119 @@
+"""The latent dynamics model of paper §3.2: encoders, fusion, f_θ, global action embeddings.
+
+    z_s  = fuse(concat(E_img(x), E_inst(instr)))          (B, d)
+    z_a  = concat(E_X[x], E_Z[z])                          (9, 32)
+    Δ    = f_θ(concat(z_s, z_a))                           MLP 160 → 128 → 128 → 128
+    ẑ'   = z_s + Δ
+    g_a  = g_X[x] + g_Z[z]                                 (training only)
+    z*   = fuse(concat(mean_i E_img(goal_i), E_inst(instr)))
+
+Planning scores every action by D(ẑ'_a, z*) and picks the smallest.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from controller.planning.actions import NUM_ACTIONS
+from controller.planning.latent.config import ModelConfig
+from controller.planning.latent.image_encoder import ImageEncoder
+from controller.planning.latent.losses import distance
+from controller.planning.latent.text_encoder import TextEncoder
+
+# (9,) axis indices of every joint action, in Action.index order (index = 3·x + z).
+ACTION_X = torch.arange(NUM_ACTIONS) // 3
+ACTION_Z = torch.arange(NUM_ACTIONS) % 3
+
+
+class LatentDynamicsModel(nn.Module):
+    def __init__(self, config: ModelConfig) -> None:
+        super().__init__()
+        self.config = config
+        d = config.latent_dim
+        self.image_encoder = ImageEncoder(
+            d, config.base_width, config.coord_channels, config.pooling, config.image_size
+        )
+        self.text_encoder = TextEncoder(
+            config.vocab_size,
+            d,
+            config.text_layers,
+            config.text_heads,
+            config.text_ff,
+            config.text_dropout,
+            config.max_tokens,
+        )
+        self.fuse = nn.Linear(2 * d, d)  # concat(E_img, E_inst) → z_s
+        if config.fusion == "gated":  # + (A·E_img) ⊙ (B·E_inst)
+            self.fuse_img = nn.Linear(d, d, bias=False)
+            self.fuse_text = nn.Linear(d, d)
+        self.action_x = nn.Embedding(3, config.action_dim)  # E_act, X axis
+        self.action_z = nn.Embedding(3, config.action_dim)  # E_act, Z axis
+        h = config.dynamics_hidden
+        self.dynamics = nn.Sequential(  # f_θ
+            nn.Linear(d + 2 * config.action_dim, h),
+            nn.ReLU(),
+            nn.Dropout(config.dynamics_dropout),
+            nn.Linear(h, h),
+            nn.ReLU(),
+            nn.Dropout(config.dynamics_dropout),
+            nn.Linear(h, d),
+        )
+        self.global_x = nn.Parameter(torch.zeros(3, d))  # g_X
+        self.global_z = nn.Parameter(torch.zeros(3, d))  # g_Z
+        nn.init.normal_(self.global_x, std=0.01)
+        nn.init.normal_(self.global_z, std=0.01)
+        self.register_buffer("action_x_index", ACTION_X.clone(), persistent=False)
+        self.register_buffer("action_z_index", ACTION_Z.clone(), persistent=False)
+
+    # --- encoders -----------------------------------------------------------------------------
+    def encode_images(self, images: torch.Tensor) -> torch.Tensor:
+        """(B, 3, S, S) in [0, 1] → (B, d) E_img."""
+        return self.image_encoder(images)
+
+    def encode_text(self, ids: torch.Tensor) -> torch.Tensor:
+        """(B, L) token ids → (B, d) E_inst."""
+        return self.text_encoder(ids)
+
+    def fuse_state(self, img_emb: torch.Tensor, text_emb: torch.Tensor) -> torch.Tensor:
+        """(B, d), (B, d) → (B, d) z_s (also used for the goal prototype z*)."""
+        z = self.fuse(torch.cat([img_emb, text_emb], dim=-1))
+        if self.config.fusion == "gated":
+            z = z + self.fuse_img(img_emb) * self.fuse_text(text_emb)
+        return z
+
+    def action_embeddings(self) -> torch.Tensor:
+        """(9, 32) z_a of every joint action."""
+        return torch.cat([self.action_x(self.action_x_index), self.action_z(self.action_z_index)], dim=-1)
+
+    def global_shifts(self) -> torch.Tensor:
+        """(9, d) g_a = g_X[x] + g_Z[z] of every joint action."""
+        return self.global_x[self.action_x_index] + self.global_z[self.action_z_index]
+
+    # --- dynamics -----------------------------------------------------------------------------
+    def deltas(self, z_s: torch.Tensor) -> torch.Tensor:
+        """(B, d) → (B, 9, d): Δ_θ(z_s, z_a) for every action, all in one batch."""
+        b, d = z_s.shape
+        z_a = self.action_embeddings()  # (9, 32)
+        pairs = torch.cat(
+            [z_s.unsqueeze(1).expand(b, NUM_ACTIONS, d), z_a.unsqueeze(0).expand(b, -1, -1)], dim=-1
+        )  # (B, 9, d + 32)
+        return self.dynamics(pairs)  # (B, 9, d)
+
+    def score(self, z_s: torch.Tensor, z_goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Distances of every predicted next state to the goal.
+
+        z_s (B, d), z_goal (B, d) → (d_all (B, 9) = D(z_s + Δ_a, z*), deltas (B, 9, d)).
+        """
+        deltas = self.deltas(z_s)
+        z_next = z_s.unsqueeze(1) + deltas  # (B, 9, d)
+        return distance(z_next, z_goal.unsqueeze(1), self.config.distance), deltas
+
+    def forward(
+        self, images: torch.Tensor, ids: torch.Tensor, goal_image_embedding: torch.Tensor
+    ) -> torch.Tensor:
+        """Planning in one call: (B, 3, S, S), (B, L), (d,) → (B, 9) distances to the goal."""
+        text = self.encode_text(ids)
+        z_s = self.fuse_state(self.encode_images(images), text)
+        z_goal = self.fuse_state(goal_image_embedding.expand_as(text), text)
+        return self.score(z_s, z_goal)[0]

@@ -1,0 +1,93 @@
+"""`LatentPlanner`: paper Algorithm 2, one decision per call.
+
+Per call: one image encoding, the instruction's encoding (cached per distinct
+instruction, since a mission repeats the same one), z_s and z*, and all 9 candidate
+actions scored in one batch; the chosen action is the argmin of the distances.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import OrderedDict
+from collections.abc import Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+from controller.planning.actions import Action
+from controller.planning.latent.checkpoint import load_checkpoint
+from controller.planning.latent.errors import ImageInputError
+from controller.planning.latent.image_encoder import fused_for_inference
+
+log = logging.getLogger(__name__)
+
+
+class LatentPlanner:
+    """Load a checkpoint folder once; `plan(image, instruction)` → (Action, distances (9,))."""
+
+    def __init__(self, checkpoint_dir: str | Path, threads: int | None = 1, cache_size: int = 64) -> None:
+        if threads is not None:
+            torch.set_num_threads(threads)
+        ckpt = load_checkpoint(Path(checkpoint_dir))
+        self.checkpoint_dir = Path(checkpoint_dir)
+        self.model = ckpt.model.eval()
+        self.model.image_encoder = fused_for_inference(self.model.image_encoder)  # BN folded
+        self.tokenizer = ckpt.tokenizer
+        self.config = ckpt.config
+        self.meta = ckpt.meta
+        self._goal_image = ckpt.goal_image_embedding.unsqueeze(0)  # (1, d)
+        self._cache: OrderedDict[str, tuple[torch.Tensor, torch.Tensor]] = OrderedDict()
+        self._cache_size = cache_size
+
+    @property
+    def image_size(self) -> int:
+        return self.config.image_size
+
+    def plan(self, image: np.ndarray, instruction: str) -> tuple[Action, np.ndarray]:
+        """The action minimising D(z_s + Δ_a, z*) and all 9 distances (float32, Action.index order)."""
+        actions, distances = self.plan_batch([image], instruction)
+        return actions[0], distances[0]
+
+    @torch.inference_mode()
+    def plan_batch(self, images: Sequence[np.ndarray], instruction: str) -> tuple[list[Action], np.ndarray]:
+        """Plan for several images under one instruction: (actions, distances (N, 9))."""
+        if len(images) == 0:
+            raise ImageInputError("plan_batch needs at least one image")
+        text, z_goal = self._instruction(instruction)
+        x = torch.from_numpy(np.stack([self.prepare(img) for img in images]))  # (N, S, S, 3) uint8
+        x = x.permute(0, 3, 1, 2).to(torch.float32).div_(255.0)  # (N, 3, S, S), channels-last strides
+        n = x.shape[0]
+        z_s = self.model.fuse_state(self.model.encode_images(x), text.expand(n, -1))  # (N, d)
+        dist = self.model.score(z_s, z_goal.expand(n, -1))[0].numpy().astype(np.float32)  # (N, 9)
+        return [Action.from_index(int(i)) for i in dist.argmin(axis=1)], dist
+
+    def prepare(self, image: np.ndarray) -> np.ndarray:
+        """Check an RGB uint8 H×W×3 image and resize it to the model's input size."""
+        if not isinstance(image, np.ndarray):
+            raise ImageInputError(f"image must be a numpy array, got {type(image).__name__}")
+        if image.ndim != 3 or image.shape[2] != 3:
+            raise ImageInputError(f"image must be RGB with shape (H, W, 3), got shape {image.shape}")
+        if image.dtype != np.uint8:
+            raise ImageInputError(f"image must be uint8 (0–255), got dtype {image.dtype}")
+        if min(image.shape[:2]) < 8:
+            raise ImageInputError(f"image of shape {image.shape} is too small to plan from")
+        s = self.config.image_size
+        if image.shape[:2] != (s, s):
+            image = cv2.resize(image, (s, s), interpolation=cv2.INTER_AREA)
+        return np.ascontiguousarray(image)
+
+    def _instruction(self, instruction: str) -> tuple[torch.Tensor, torch.Tensor]:
+        """(1, d) E_inst and (1, d) z* for an instruction, from a small LRU cache."""
+        hit = self._cache.get(instruction)
+        if hit is not None:
+            self._cache.move_to_end(instruction)
+            return hit
+        ids = self.tokenizer.batch([instruction])  # raises InstructionError if empty
+        text = self.model.encode_text(ids)
+        entry = (text, self.model.fuse_state(self._goal_image, text))
+        self._cache[instruction] = entry
+        if len(self._cache) > self._cache_size:
+            self._cache.popitem(last=False)
+        return entry

@@ -1,0 +1,120 @@
+"""A SYNTHETIC dataset fixture in the `dronectl collect` folder format, for tests only.
+
+Not the simulator: each image is a random smooth texture with a flat drawn target
+(a gauge-like dial, a red valve wheel or a grey switch box) pasted at a known
+offset. It exercises the reading, labelling, training and evaluation code in
+seconds without PyBullet; every number the project reports comes from the real
+collected dataset instead.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+KINDS = ("gauge", "valve", "switchbox")
+
+
+def _background(rng: np.random.Generator, size: int) -> np.ndarray:
+    """A smooth random texture: low-resolution noise upsampled, in muted wall colours."""
+    coarse = rng.uniform(60, 190, size=(6, 6, 3)).astype(np.float32)
+    img = cv2.resize(coarse, (size, size), interpolation=cv2.INTER_CUBIC)
+    img += rng.normal(0, 6, size=img.shape).astype(np.float32)
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def _draw_target(img: np.ndarray, kind: str, centre: tuple[float, float], radius: int) -> None:
+    c = (round(centre[0]), round(centre[1]))
+    if kind == "gauge":
+        cv2.circle(img, c, radius, (40, 40, 40), -1, cv2.LINE_AA)
+        cv2.circle(img, c, int(radius * 0.8), (245, 245, 235), -1, cv2.LINE_AA)
+        cv2.line(img, c, (c[0] + int(radius * 0.6), c[1] - int(radius * 0.4)), (200, 20, 20), 2, cv2.LINE_AA)
+    elif kind == "valve":
+        cv2.circle(img, c, radius, (200, 30, 30), max(2, radius // 4), cv2.LINE_AA)
+        cv2.line(img, (c[0] - radius, c[1]), (c[0] + radius, c[1]), (200, 30, 30), 2, cv2.LINE_AA)
+        cv2.line(img, (c[0], c[1] - radius), (c[0], c[1] + radius), (200, 30, 30), 2, cv2.LINE_AA)
+    else:
+        cv2.rectangle(
+            img, (c[0] - radius, c[1] - radius), (c[0] + radius, c[1] + radius), (110, 115, 120), -1
+        )
+        cv2.rectangle(
+            img, (c[0] - radius // 2, c[1] - radius // 3), (c[0], c[1] + radius // 3), (20, 160, 20), -1
+        )
+
+
+def _sector(du: float, dv: float, eps: float) -> str:
+    ns = "N" if dv < -eps else "S" if dv > eps else ""
+    ew = "E" if du > eps else "W" if du < -eps else ""
+    return (ns + ew) or "centre"
+
+
+def write_synthetic_dataset(
+    root: Path,
+    *,
+    n_goal: int = 24,
+    n_train: int = 240,
+    n_test: int = 80,
+    size: int = 64,
+    seed: int = 0,
+) -> Path:
+    """Write a synthetic fixture dataset to `root` and return `root`.
+
+    Offsets of train/test targets are uniform over the central 60 % of the image; goal
+    targets sit within ε/2 of the centre (ε = 10 px at 224, scaled to `size`).
+    """
+    rng = np.random.default_rng(seed)
+    root = Path(root)
+    (root / "images").mkdir(parents=True, exist_ok=True)
+    eps = 10.0 * size / 224.0
+    reach = 0.3 * size
+    radius = max(4, size // 10)
+    rows = []
+    plan = [("goal", n_goal, 0.5 * eps), ("train", n_train, reach), ("test", n_test, reach)]
+    for split, count, spread in plan:
+        for i in range(count):
+            kind = KINDS[int(rng.integers(len(KINDS)))]
+            du, dv = (float(v) for v in rng.uniform(-spread, spread, size=2))
+            centre = (size / 2 + du, size / 2 + dv)
+            img = _background(rng, size)
+            _draw_target(img, kind, centre, radius)
+            name = f"{split}_{i:06d}"
+            cv2.imwrite(str(root / "images" / f"{name}.png"), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
+            rows.append(
+                {
+                    "id": name,
+                    "image": f"images/{name}.png",
+                    "split": split,
+                    "sector": _sector(du, dv, eps),
+                    "scene_seed": int(seed * 1000 + (i % 10) + (500 if split == "test" else 0)),
+                    "target_kind": kind,
+                    "centre_px": list(centre),
+                    "offset_px": [du, dv],
+                    "bbox_px": [
+                        centre[0] - radius,
+                        centre[1] - radius,
+                        centre[0] + radius,
+                        centre[1] + radius,
+                    ],
+                    "in_view": True,
+                    "fully_in_view": True,
+                    "visible_fraction": 1.0,
+                    "depth_m": 2.0,
+                    "drone": {"position_ned_m": [0.0, 0.0, -1.5], "yaw_deg": 0.0},
+                    "offset_m": {"right_m": 0.0, "up_m": 0.0, "distance_m": 2.0, "yaw_deg": 0.0},
+                    "scene": {"synthetic": True},
+                }
+            )
+    meta = {
+        "generator_version": "synthetic-fixture-1",
+        "seed": seed,
+        "created_by": "controller.planning.latent.synthetic (test fixture, not the simulator)",
+        "camera": {"width": size, "height": size, "hfov_deg": 60.0},
+        "scene_config": {},
+        "counts": {s: n for s, n, _ in plan},
+    }
+    (root / "dataset.json").write_text(json.dumps(meta, indent=1))
+    (root / "manifest.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    return root

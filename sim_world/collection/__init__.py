@@ -1,0 +1,1 @@
+"""Data collection: the paper's protocol (goal, sector, test, empty images) and scripted demos."""

@@ -1,0 +1,328 @@
+"""The forward camera as MJPEG, rendered in its own process.
+
+PyBullet holds the GIL while it renders (12 ms per 224 px frame on an idle core of
+this machine, 40+ ms when loaded), so rendering inside the vehicle loop stalled
+command acks and telemetry. As PX4 SITL leaves the camera to its simulator process,
+the vehicle leaves it to a render process: that process rebuilds the same scene
+from the same config and seed, and for each frame poses its drone as the vehicle's
+drone was last seen (a shared array the vehicle loop overwrites after each physics
+batch), renders, and publishes image + truth through `sim_world.rendering.mjpeg.MjpegServer`.
+
+The truth (target pixel centre/bbox, drone pose) is for the test harness only,
+via `/truth.json`; nothing of it goes over MAVLink.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import multiprocessing as mp
+import os
+import random
+import signal
+import time
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from typing import Any
+
+import numpy as np
+import pybullet as p
+
+from core.frames import enu_to_ned, yaw_enu_to_ned_rad
+from sim_world.rendering.mjpeg import MjpegServer
+from sim_world.world import World, WorldConfig
+
+log = logging.getLogger(__name__)
+
+# Shared pose layout: position ENU (3), quaternion xyzw (4), velocity ENU (3), sim time.
+_POSE_LEN = 11
+POSE_LOCK_TIMEOUT_S = 0.05
+STOP_POLL_S = 0.02  # the render process checks its stop flag at least this often while pacing
+
+
+class VideoError(RuntimeError):
+    """The render process could not start or serve (port in use, scene error, ...)."""
+
+
+@dataclass(frozen=True)
+class VideoFaults:
+    """A bad camera on purpose: dropped frames, a frozen picture, a stream that dies.
+
+    Times are simulated seconds since the vehicle started (a mission's loop typically
+    begins 10-20 s in, after readiness, arming and the takeoff). While frozen, the last
+    image is sent again and again (new frame numbers, the same picture, as a stuck encoder
+    does) while `/truth.json` keeps telling the truth. A dead stream closes the server.
+    """
+
+    drop: float = 0.0  # fraction of rendered frames never sent
+    freeze_at_s: float | None = None
+    freeze_for_s: float = 3.0
+    dies_at_s: float | None = None
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.drop < 1.0:
+            raise ValueError(f"VideoFaults.drop must be in [0, 1), got {self.drop}")
+        for name in ("freeze_at_s", "dies_at_s"):
+            value = getattr(self, name)
+            if value is not None and not value >= 0.0:
+                raise ValueError(f"VideoFaults.{name} must be >= 0 s, got {value}")
+        if not self.freeze_for_s > 0.0:
+            raise ValueError(f"VideoFaults.freeze_for_s must be > 0, got {self.freeze_for_s}")
+
+
+class TruthExtremes:
+    """The largest speeds and excursions from home over every frame's pose (judging only)."""
+
+    def __init__(self) -> None:
+        self.horizontal_speed_m_s = 0.0
+        self.vertical_speed_m_s = 0.0
+        self.low_ned_m = [0.0, 0.0, 0.0]
+        self.high_ned_m = [0.0, 0.0, 0.0]
+
+    def update(self, ned_m: list[float], velocity_ned_m_s: list[float]) -> None:
+        vn, ve, vd = velocity_ned_m_s
+        self.horizontal_speed_m_s = max(self.horizontal_speed_m_s, math.hypot(vn, ve))
+        self.vertical_speed_m_s = max(self.vertical_speed_m_s, abs(vd))
+        self.low_ned_m = [min(a, b) for a, b in zip(self.low_ned_m, ned_m, strict=True)]
+        self.high_ned_m = [max(a, b) for a, b in zip(self.high_ned_m, ned_m, strict=True)]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "max_horizontal_speed_m_s": round(self.horizontal_speed_m_s, 3),
+            "max_vertical_speed_m_s": round(self.vertical_speed_m_s, 3),
+            "min_ned_m": [round(v, 3) for v in self.low_ned_m],
+            "max_ned_m": [round(v, 3) for v in self.high_ned_m],
+        }
+
+
+@dataclass(frozen=True)
+class VideoConfig:
+    host: str = "127.0.0.1"
+    port: int = 8080
+    fps: float = 15.0
+    jpeg_quality: int = 85
+    start_timeout_s: float = 60.0  # a fresh interpreter importing pybullet and building the scene
+    clock: str = "wall"
+    """"wall": render the latest pose `fps` times per wall second (sim-vehicle, paced to the wall
+    clock); "sim": render each `capture()` once, the caller capturing `fps` times per simulated
+    second (the PX4 bridge, which may run faster or slower than real time)."""
+    max_behind_s: float = 1.0  # "sim" clock: how long capture() waits for the previous frame
+    faults: VideoFaults | None = None
+
+    def __post_init__(self) -> None:
+        if self.clock not in ("wall", "sim"):
+            raise ValueError(f"VideoConfig.clock must be 'wall' or 'sim', got {self.clock!r}")
+
+
+class WorldVideoFeed:
+    """Vehicle-side handle of the render process; `capture()` from the vehicle loop only."""
+
+    def __init__(self, world: World, origin_enu_m: np.ndarray, config: VideoConfig):
+        self._world = world
+        self.config = config
+        ctx = mp.get_context("spawn")  # no fork of a process that holds a PyBullet client and threads
+        self._pose = ctx.Array("d", _POSE_LEN)
+        # Lock-free shared flags and counters (one writer each): a render process killed while it
+        # held a lock, or while it slept in a multiprocessing Event's wait(), would hang the vehicle
+        # on its next set() or read (Event.set() waits for every sleeper to wake; a dead one never
+        # does: sim-vehicle hung on a process-group SIGTERM). Only the pose keeps a lock, taken by
+        # the vehicle with a timeout.
+        self._frames = ctx.Value("q", 0, lock=False)
+        self._render_s = ctx.Value("d", 0.0, lock=False)
+        self._stop = ctx.Value("b", 0, lock=False)
+        self._requested = ctx.Value("q", 0, lock=False)  # "sim" clock: captures so far
+        self._conn, self._child_conn = ctx.Pipe(duplex=False)
+        self._write_pose()
+        self._proc = ctx.Process(
+            target=_serve,
+            args=(world.config, world.seed, np.asarray(origin_enu_m, float), config, self._pose, self._stop),
+            kwargs={
+                "conn": self._child_conn,
+                "frames": self._frames,
+                "render_s": self._render_s,
+                "requested": self._requested,
+            },
+            name="sim-vehicle-video",
+            daemon=True,
+        )
+        self.stream_url = ""
+
+    @property
+    def truth_url(self) -> str:
+        return self.stream_url.replace("/stream.mjpg", "/truth.json")
+
+    @property
+    def frames(self) -> int:
+        return int(self._frames.value)
+
+    @property
+    def mean_render_ms(self) -> float:
+        n = self.frames
+        return 1000.0 * self._render_s.value / n if n else 0.0
+
+    def start(self) -> None:
+        """Spawn the render process and wait until it serves; VideoError naming the port otherwise."""
+        self._proc.start()
+        self._child_conn.close()  # the child's end lives in the child now
+        if not self._conn.poll(self.config.start_timeout_s):
+            self.close()
+            raise VideoError(f"video process did not start within {self.config.start_timeout_s:.0f} s")
+        kind, detail = self._conn.recv()
+        if kind != "ready":
+            self.close()
+            raise VideoError(f"video on {self.config.host}:{self.config.port}: {detail}")
+        self.stream_url = detail
+        log.info("video %s (render process %d)", self.stream_url, self._proc.pid)
+
+    def capture(self) -> None:
+        """Hand the drone's current pose to the render process (cheap: no rendering here).
+
+        With the "sim" clock each capture is one frame: first wait (bounded) until the frame
+        asked for last is out, so the stream keeps `fps` frames per simulated second.
+        """
+        if self.config.clock == "sim":
+            deadline = time.monotonic() + self.config.max_behind_s
+            while self._frames.value < self._requested.value and time.monotonic() < deadline:
+                if not self._proc.is_alive():
+                    break
+                time.sleep(0.0005)
+            if self._write_pose():
+                self._requested.value += 1
+        else:
+            self._write_pose()
+
+    def _write_pose(self) -> bool:
+        s = self._world.state()
+        values = [*s.position_enu_m, *s.quaternion_xyzw, *s.velocity_enu_m_s, self._world.time_s]
+        lock = self._pose.get_lock()
+        if not lock.acquire(timeout=POSE_LOCK_TIMEOUT_S):  # the renderer died holding it: skip
+            log.debug("video pose lock not free within %.2f s; frame pose not updated", POSE_LOCK_TIMEOUT_S)
+            return False
+        try:
+            self._pose[:] = values
+        finally:
+            lock.release()
+        return True
+
+    @property
+    def alive(self) -> bool:
+        return self._proc.is_alive()
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        self._stop.value = 1  # a plain shared byte: safe even if the render process is already dead
+        if self._proc.pid is not None:
+            self._proc.join(timeout_s)
+            if self._proc.is_alive():
+                log.warning("video process did not stop; terminating it")
+                self._proc.terminate()
+                self._proc.join(timeout_s)
+        self._conn.close()
+
+
+def _serve(
+    world_config: WorldConfig,
+    seed: int,
+    origin_enu_m: np.ndarray,
+    config: VideoConfig,
+    pose: Any,
+    stop: Any,
+    conn: Connection,
+    frames: Any,
+    render_s: Any,
+    requested: Any,
+) -> None:
+    """The render process: same scene, drone posed from `pose`, frames at `config.fps` (see `clock`)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent stops us
+    try:
+        world = World(world_config, seed)
+    except Exception as exc:
+        conn.send(("error", f"cannot build the world: {exc}"))
+        return
+    with world:
+        try:
+            server = MjpegServer(config.host, config.port, jpeg_quality=config.jpeg_quality)
+        except OSError as exc:
+            conn.send(("error", str(exc)))
+            return
+        with server:
+            conn.send(("ready", server.stream_url))
+            period = 1.0 / config.fps
+            next_t = time.monotonic()
+            parent = os.getppid()
+            # A vehicle killed outright never sets `stop` (and `daemon=True` only acts on a normal
+            # exit): re-parenting means it is gone, so stop rather than render for nobody forever.
+            sim_clock = config.clock == "sim"
+            faults = config.faults or VideoFaults()
+            rng = random.Random(faults.seed)
+            extremes = TruthExtremes()
+            frozen: np.ndarray | None = None
+            while not stop.value and os.getppid() == parent:
+                if sim_clock:
+                    if requested.value <= frames.value:  # nothing new to draw
+                        time.sleep(0.0005)
+                        continue
+                    frames_wanted = requested.value
+                t0 = time.monotonic()
+                with pose.get_lock():
+                    values = list(pose)
+                p.resetBasePositionAndOrientation(
+                    world.drone.body_id, values[0:3], values[3:7], physicsClientId=world.client_id
+                )
+                render = world.render(with_seg=True)
+                truth = frame_truth(world, render, values, origin_enu_m)
+                extremes.update(truth["drone"]["position_ned_m"], truth["drone"]["velocity_ned_m_s"])
+                truth["extremes"] = extremes.as_dict()
+                sim_s = values[10]
+                if faults.dies_at_s is not None and sim_s >= faults.dies_at_s:
+                    log.warning("video: the stream dies at %.1f s (injected fault)", sim_s)
+                    break
+                image = render.rgb
+                if faults.freeze_at_s is not None and 0 <= sim_s - faults.freeze_at_s < faults.freeze_for_s:
+                    frozen = image if frozen is None else frozen
+                    image = frozen
+                if not (faults.drop and rng.random() < faults.drop):
+                    server.publish(image, truth)
+                render_s.value += time.monotonic() - t0
+                if sim_clock:
+                    frames.value = frames_wanted  # (a capture that raced this frame is drawn next)
+                    continue
+                frames.value += 1
+                next_t = max(next_t + period, time.monotonic())
+                while not stop.value and (left := next_t - time.monotonic()) > 0:
+                    time.sleep(min(STOP_POLL_S, left))
+
+
+def frame_truth(world: World, render: Any, pose: list[float], origin_enu_m: np.ndarray) -> dict[str, Any]:
+    """JSON-able truth of one frame: the target in pixels and the drone's pose (ENU and NED from home)."""
+    truth = world.target_truth(render)
+    position = np.asarray(pose[0:3])
+    yaw_enu = world.state().yaw_enu_rad
+    return {
+        "time_s": round(pose[10], 4),
+        "target": {
+            "kind": world.scene.target_kind,
+            "centre_px": _floats(truth.centre_px),
+            "offset_px": _floats(truth.offset_px),
+            "bbox_px": None if truth.bbox_px is None else _floats(truth.bbox_px),
+            "in_view": bool(truth.in_view),
+            "fully_in_view": bool(truth.fully_in_view),
+            "visible_fraction": float(truth.visible_fraction),
+            "depth_m": _finite(truth.depth_m),
+            "image_size": [int(v) for v in truth.image_size],
+        },
+        "drone": {
+            "position_enu_m": _floats(position),
+            "position_ned_m": _floats(enu_to_ned(position - origin_enu_m)),
+            "velocity_ned_m_s": _floats(enu_to_ned(pose[7:10])),
+            "yaw_deg": math.degrees(yaw_enu_to_ned_rad(yaw_enu)),
+        },
+    }
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def _floats(values: Any) -> list[float | None]:
+    return [_finite(float(v)) for v in values]

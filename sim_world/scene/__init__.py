@@ -1,0 +1,1 @@
+"""The inspection scene: configuration (domain randomisation ranges), sampling, assets and bodies, truth."""

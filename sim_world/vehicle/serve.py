@@ -1,0 +1,243 @@
+"""`dronectl sim-vehicle`: build the PyBullet world and serve it as a MAVLink vehicle until stopped.
+
+The drone starts landed. With a start offset (right, up, distance, yaw relative to the
+centred pose in front of the target, as `Scene.pose_for_offset`) it starts on the
+floor below that pose with that heading, and MIS_TAKEOFF_ALT is set so that a
+plain takeoff climbs exactly to the pose (an explicit MIS_TAKEOFF_ALT override wins).
+A hovering start is not offered: PX4 boots on the ground, so must the sim.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import threading
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any, TextIO
+
+from sim_world.physics.wind import WindConfig
+from sim_world.process_entry import say_ready, stop_on_signals
+from sim_world.process_entry import watch_parent as parent_watch
+from sim_world.rendering.camera import CameraConfig
+from sim_world.rendering.video import VideoConfig, VideoError, VideoFaults, WorldVideoFeed
+from sim_world.scene.config import DEFAULT_SCENE, SceneConfig, parse_scene_config
+from sim_world.vehicle.commander import CommanderConfig
+from sim_world.vehicle.config import SimVehicleConfig
+from sim_world.vehicle.params import PX4_PARAMS
+from sim_world.vehicle.server import LoopStats, SimVehicle, SimVehicleError
+from sim_world.vehicle.world_model import WorldVehicleModel
+from sim_world.world import World, WorldConfig
+
+log = logging.getLogger(__name__)
+
+_TAKEOFF_SPEC = next(s for s in PX4_PARAMS if s.name == "MIS_TAKEOFF_ALT")
+
+
+@dataclass(frozen=True)
+class StartOffset:
+    """Where the drone starts, relative to the centred pose in front of the target."""
+
+    right_m: float = 0.0
+    up_m: float = 0.0
+    distance_m: float = 2.5
+    yaw_deg: float = 0.0
+
+    @classmethod
+    def parse(cls, text: str) -> StartOffset:
+        """From "right,up,distance,yaw" (metres, metres, metres, degrees)."""
+        parts = text.split(",")
+        try:
+            values = [float(v) for v in parts]
+        except ValueError:
+            raise ValueError(f"start offset {text!r}: expected four numbers right,up,distance,yaw") from None
+        if len(values) != 4:
+            raise ValueError(f"start offset {text!r}: expected four numbers right,up,distance,yaw")
+        offset = cls(*values)
+        if offset.distance_m <= 0.3:
+            raise ValueError(f"start offset {text!r}: distance must be > 0.3 m")
+        return offset
+
+
+@dataclass(frozen=True)
+class SimVehicleRun:
+    """Everything `dronectl sim-vehicle` needs: the vehicle, the world and how long to run."""
+
+    vehicle: SimVehicleConfig = field(default_factory=SimVehicleConfig)
+    scene: SceneConfig = DEFAULT_SCENE
+    seed: int = 0
+    start_offset: StartOffset | None = None
+    image_size_px: int = 224
+    duration_s: float | None = None  # None: until stopped
+    status_every_s: float = 0.0  # log the loop statistics this often (0: never)
+    wind: WindConfig = field(default_factory=WindConfig)
+    video_faults: VideoFaults | None = None
+    dies_at_s: float | None = None
+    """An injected fault: the vehicle process kills itself (SIGKILL) at this simulated time."""
+
+
+@dataclass(frozen=True)
+class SimVehicleReady:
+    """What the ready line says: where to connect, and the vehicle's MAVLink system id."""
+
+    mavlink_url: str
+    system_id: int
+    local_address: list[Any]
+    video_url: str | None
+    truth_url: str | None
+
+
+def build_world(run: SimVehicleRun) -> tuple[World, SimVehicleConfig]:
+    """The world with the drone placed, and the vehicle config with MIS_TAKEOFF_ALT filled in."""
+    camera = CameraConfig(width=run.image_size_px, height=run.image_size_px)
+    world = World(WorldConfig(scene=run.scene, camera=camera, wind=run.wind), seed=run.seed)
+    vehicle = run.vehicle
+    if run.start_offset is not None:
+        o = run.start_offset
+        position, yaw_enu = world.scene.pose_for_offset(o.right_m, o.up_m, o.distance_m, o.yaw_deg)
+        ground = world.drone.resting_height_m
+        world.drone.set_pose((float(position[0]), float(position[1]), ground), yaw_enu)
+        climb = min(max(float(position[2]) - ground, _TAKEOFF_SPEC.minimum), _TAKEOFF_SPEC.maximum)
+        if "MIS_TAKEOFF_ALT" not in vehicle.params:
+            vehicle = replace(vehicle, params={**vehicle.params, "MIS_TAKEOFF_ALT": round(climb, 3)})
+        log.info("start below %s (ENU), takeoff climbs %.2f m", [round(float(v), 2) for v in position], climb)
+    return world, vehicle
+
+
+def run_sim_vehicle(
+    run: SimVehicleRun,
+    stop: threading.Event | None = None,
+    on_ready: Callable[[SimVehicle], None] | None = None,
+) -> LoopStats:
+    """Serve the world until `stop` is set or `duration_s` passes; returns the loop statistics.
+
+    `on_ready(vehicle)` (a callable) is called once the ports are open.
+    """
+    stop = stop or threading.Event()
+    world, vehicle_config = build_world(run)
+    with world:
+        model = WorldVehicleModel(world)
+        video = None
+        if vehicle_config.video:
+            video = WorldVideoFeed(
+                world,
+                model.origin_enu_m,
+                VideoConfig(
+                    vehicle_config.video_host,
+                    vehicle_config.http_video_port,
+                    vehicle_config.video_fps,
+                    faults=run.video_faults,
+                ),
+            )
+        with SimVehicle(model, vehicle_config, video=video) as vehicle:
+            if on_ready is not None:
+                on_ready(vehicle)
+            waited = 0.0
+            period = run.status_every_s if run.status_every_s > 0 else 0.5
+            if run.dies_at_s is not None:
+                period = min(period, 0.05)
+            while not stop.is_set() and vehicle.running:
+                if run.duration_s is not None and waited >= run.duration_s:
+                    break
+                if run.dies_at_s is not None and vehicle.stats().sim_s >= run.dies_at_s:
+                    log.warning(
+                        "sim-vehicle: dying at %.1f s of simulated time (injected fault)", run.dies_at_s
+                    )
+                    os.kill(os.getpid(), signal.SIGKILL)  # no goodbye on the link, as a crash
+                step = period if run.duration_s is None else min(period, run.duration_s - waited)
+                stop.wait(step)
+                waited += step
+                if run.status_every_s > 0:
+                    s = vehicle.stats()
+                    log.info(
+                        "sim %.1f s / wall %.1f s (x%.2f), %s, %d frames (%.1f ms), %d msgs in, %d out",
+                        s.sim_s, s.wall_s, s.real_time_factor, vehicle.mode.name, s.video_frames,
+                        s.mean_render_ms, s.messages_in, s.messages_out,
+                    )  # fmt: skip
+            stats = vehicle.stats()
+    return stats
+
+
+# --------------------------------------------------------------------------- serving a process
+READY_PREFIX = "sim-vehicle ready: "
+
+
+def serve(
+    run: SimVehicleRun, out: TextIO, watch_parent: bool = False, extra_stop: threading.Event | None = None
+) -> int:
+    """Serve until SIGINT, SIGTERM, SIGHUP (or the parent's death, with `watch_parent`); an exit code.
+
+    Prints `sim-vehicle ready: {json}` once the ports are open (`SimVehicleReady`) and a summary
+    at the end. 0: stopped as asked; 1: the vehicle could not start or failed (a port in use, a
+    bad scene): the reason is printed, and nothing keeps running.
+    """
+    stop = extra_stop or stop_on_signals("sim-vehicle")
+    if watch_parent:
+        parent_watch(stop, "sim-vehicle")
+
+    def ready(vehicle: SimVehicle) -> None:
+        cfg = vehicle.config
+        info = SimVehicleReady(
+            mavlink_url=cfg.connection_url(),
+            system_id=cfg.system_id,
+            local_address=list(vehicle.local_address),
+            video_url=vehicle.video_url,
+            truth_url=vehicle.truth_url,
+        )
+        say_ready(out, READY_PREFIX, info)
+
+    try:
+        stats = run_sim_vehicle(run, stop, on_ready=ready)
+    except (OSError, SimVehicleError, VideoError) as exc:
+        out.write(f"sim-vehicle failed: {exc}\n")
+        out.flush()
+        return 1
+    out.write(
+        f"sim-vehicle: {stats.sim_s:.1f} s simulated in {stats.wall_s:.1f} s "
+        f"(x{stats.real_time_factor:.2f} real time), {stats.video_frames} video frames\n"
+    )
+    out.flush()
+    return 0
+
+
+def run_to_json(run: SimVehicleRun) -> dict[str, Any]:
+    """The run as JSON for the process entry point (`python -m sim_world.vehicle --config FILE`)."""
+    v = run.vehicle
+    return {
+        "vehicle": {
+            "instance": v.instance, "bind_host": v.bind_host, "remote_host": v.remote_host,
+            "remote_port": v.remote_port, "local_port": v.local_port, "sysid": v.sysid, "speed": v.speed,
+            "arming_boot_delay_s": v.commander.arming_boot_delay_s, "params": dict(v.params),
+            "video": v.video, "video_port": v.video_port, "video_host": v.video_host,
+            "video_fps": v.video_fps,
+        },
+        "scene": run.scene.model_dump(mode="json"),
+        "seed": run.seed,
+        "start_offset": None if run.start_offset is None else asdict(run.start_offset),
+        "image_size_px": run.image_size_px,
+        "duration_s": run.duration_s,
+        "status_every_s": run.status_every_s,
+        "wind": asdict(run.wind),
+        "video_faults": None if run.video_faults is None else asdict(run.video_faults),
+        "dies_at_s": run.dies_at_s,
+    }  # fmt: skip
+
+
+def run_from_json(data: dict[str, Any]) -> SimVehicleRun:
+    """The inverse of `run_to_json` (validated by the dataclasses and the scene model)."""
+    v = dict(data["vehicle"])
+    commander = CommanderConfig(arming_boot_delay_s=float(v.pop("arming_boot_delay_s")))
+    wind = {k: tuple(x) if isinstance(x, list) else x for k, x in data["wind"].items()}
+    return SimVehicleRun(
+        vehicle=SimVehicleConfig(commander=commander, **v),
+        scene=parse_scene_config(data["scene"], "<sim-vehicle config>"),
+        seed=int(data["seed"]),
+        start_offset=None if data["start_offset"] is None else StartOffset(**data["start_offset"]),
+        image_size_px=int(data["image_size_px"]),
+        duration_s=data["duration_s"],
+        status_every_s=float(data["status_every_s"]),
+        wind=WindConfig(**wind),
+        video_faults=None if data.get("video_faults") is None else VideoFaults(**data["video_faults"]),
+        dies_at_s=data.get("dies_at_s"),
+    )

@@ -1,0 +1,294 @@
+"""`SimVehicle`: a simulated airframe served as a PX4-flavoured MAVLink 2 vehicle over UDP.
+
+One background thread owns the airframe (`VehicleModel`: the PyBullet `World` in
+production, a kinematic fake in unit tests) and runs the loop PX4 SITL runs in
+lockstep with its simulator: step the physics to keep up with the wall clock (×
+`speed`), apply PX4's commander rules, answer every message, stream telemetry at
+the requested rates, and hand the drone's pose to the camera feed (which renders
+and serves MJPEG in its own process: see `sim_world.vehicle.video`).
+
+Use in-process (tests) as `with SimVehicle(model, config) as v: ...`, or through
+`dronectl sim-vehicle` (`sim_world.vehicle.serve`).
+"""
+
+from __future__ import annotations
+
+import logging
+import select
+import threading
+import time
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Protocol
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from sim_world.vehicle.battery import BatteryModel
+from sim_world.vehicle.commander import Commander
+from sim_world.vehicle.commands import MessageHandler
+from sim_world.vehicle.config import SimVehicleConfig
+from sim_world.vehicle.link import UdpMavlinkLink
+from sim_world.vehicle.model import VehicleModel
+from sim_world.vehicle.params import ParameterStore
+from sim_world.vehicle.px4_modes import Px4Mode
+from sim_world.vehicle.telemetry import DEFAULT_RATES_HZ, MessageScheduler, TelemetryBuilder, VehicleSnapshot
+
+log = logging.getLogger(__name__)
+
+
+class VideoFeed(Protocol):
+    """The camera stream beside the vehicle (`sim_world.rendering.video.WorldVideoFeed`)."""
+
+    stream_url: str
+
+    @property
+    def truth_url(self) -> str: ...
+
+    @property
+    def frames(self) -> int: ...
+
+    @property
+    def mean_render_ms(self) -> float: ...
+
+    def start(self) -> None: ...
+
+    def capture(self) -> None:
+        """Called by the vehicle loop after each physics batch: take the drone's pose for the next frame."""
+        ...
+
+    @property
+    def alive(self) -> bool:
+        """Whether the render process still runs."""
+        ...
+
+    def close(self) -> None: ...
+
+
+_STATUSTEXT_CHUNK = 50
+_MIN_WAIT_S = 0.0005
+_MAX_WAIT_S = 0.02
+
+
+class SimVehicleError(RuntimeError):
+    """The vehicle loop failed, or the vehicle was used wrongly (start twice, ...)."""
+
+
+@dataclass
+class LoopStats:
+    """What the loop measured; read `SimVehicle.stats()` for a copy."""
+
+    wall_s: float = 0.0
+    sim_s: float = 0.0
+    iterations: int = 0
+    physics_steps: int = 0
+    dropped_sim_s: float = 0.0  # time given up because the loop could not keep up
+    video_frames: int = 0  # rendered by the video process
+    mean_render_ms: float = 0.0
+    messages_in: int = 0
+    messages_out: int = 0
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.sim_s / self.wall_s if self.wall_s > 0 else 0.0
+
+
+class SimVehicle:
+    """A `VehicleModel` behind a PX4-like MAVLink endpoint; `start()`/`close()` or a context manager."""
+
+    def __init__(
+        self, model: VehicleModel, config: SimVehicleConfig | None = None, video: VideoFeed | None = None
+    ):
+        self.config = config or SimVehicleConfig()
+        self._model = model
+        self._video = video
+        self.params = ParameterStore(overrides=self.config.params)
+        self.commander = Commander(model, self.params, self.config.commander)
+        self._battery = BatteryModel(self.config.battery)
+        self._builder = TelemetryBuilder(self.config.home, uid=0x5157_0000 + self.config.instance)
+        self._boot_s = model.time_s
+        self._link: UdpMavlinkLink | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._error: BaseException | None = None
+        self._stats = LoopStats()
+        self._stats_lock = threading.Lock()
+        self._snapshot: VehicleSnapshot = self._take_snapshot()
+
+    # ------------------------------------------------------------ lifecycle
+    def start(self) -> SimVehicle:
+        """Open the UDP endpoint, run the loop in a daemon thread, then start the video feed.
+
+        The loop starts first so heartbeats flow while the render process boots (seconds).
+        """
+        if self._thread is not None:
+            raise SimVehicleError("SimVehicle.start() called twice")
+        cfg = self.config
+        self._link = UdpMavlinkLink(
+            cfg.bind_host,
+            cfg.mavlink_local_port,
+            (cfg.remote_host, cfg.mavlink_remote_port),
+            cfg.system_id,
+            1,
+        )
+        self._thread = threading.Thread(target=self._run, name=f"sim-vehicle-{cfg.instance}", daemon=True)
+        self._thread.start()
+        try:
+            if self._video is not None:
+                self._video.start()
+        except BaseException:
+            self.close()
+            raise
+        log.info(
+            "sim vehicle %d: MAVLink sysid %d on udp %s:%d -> %s:%d%s",
+            cfg.instance, cfg.system_id, *self._link.local_address, cfg.remote_host, cfg.mavlink_remote_port,
+            f", video {self._video.stream_url}" if self._video else "",
+        )  # fmt: skip
+        return self
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Stop the loop and free the ports (idempotent); re-raises a loop failure as SimVehicleError."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+            if self._thread.is_alive():
+                log.error("sim vehicle loop did not stop within %.1f s", timeout_s)
+        if self._video is not None:
+            # Safe when the render process already died with us (a process-group SIGTERM from
+            # `timeout`, a supervisor or a closing terminal): its stop flag is a lock-free byte.
+            self._video.close()
+        if self._link is not None:
+            self._link.close()
+            self._link = None
+        stats = self.stats()
+        log.info(
+            "sim vehicle closed: %.1f s simulated in %.1f s (x%.2f real time), %d video frames (%.1f ms)",
+            stats.sim_s, stats.wall_s, stats.real_time_factor, stats.video_frames, stats.mean_render_ms,
+        )  # fmt: skip
+        if self._error is not None:
+            error, self._error = self._error, None
+            raise SimVehicleError(f"sim vehicle loop failed: {error!r}") from error
+
+    def __enter__(self) -> SimVehicle:
+        return self.start()
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    # -------------------------------------------------------------- queries
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    @property
+    def local_address(self) -> tuple[str, int]:
+        if self._link is None:
+            raise SimVehicleError("SimVehicle is not started")
+        return self._link.local_address
+
+    @property
+    def video_url(self) -> str | None:
+        return None if self._video is None else self._video.stream_url
+
+    @property
+    def truth_url(self) -> str | None:
+        return None if self._video is None else self._video.truth_url
+
+    def snapshot(self) -> VehicleSnapshot:
+        """The latest state the loop published (thread-safe: an immutable object)."""
+        return self._snapshot
+
+    @property
+    def mode(self) -> Px4Mode:
+        return self._snapshot.mode
+
+    def stats(self) -> LoopStats:
+        with self._stats_lock:
+            stats = LoopStats(**vars(self._stats))
+        if self._video is not None:
+            stats.video_frames, stats.mean_render_ms = self._video.frames, self._video.mean_render_ms
+        return stats
+
+    # ----------------------------------------------------------------- loop
+    def _run(self) -> None:
+        try:
+            self._loop()
+        except BaseException as exc:
+            log.exception("sim vehicle loop failed")
+            self._error = exc
+
+    def _loop(self) -> None:
+        cfg, model, link = self.config, self._model, self._link
+        assert link is not None
+        dt = 1.0 / model.physics_hz
+        scheduler = MessageScheduler(DEFAULT_RATES_HZ, time.monotonic())
+        handler = MessageHandler(
+            self.commander, self.params, scheduler, self._builder, self._take_snapshot,
+            cfg.system_id, cfg.home.altitude_amsl_m,
+        )  # fmt: skip
+        wall0 = start_wall = time.monotonic()
+        sim0 = model.time_s
+        text_id = 0
+        while not self._stop.is_set():
+            now = time.monotonic()
+            # 1. physics: catch up with the wall clock (× speed), dropping time after a long stall
+            lag_s = sim0 + cfg.speed * (now - wall0) - model.time_s
+            dropped = max(0.0, lag_s - cfg.max_catch_up_s * cfg.speed)
+            wall0 += dropped / cfg.speed
+            steps = int((lag_s - dropped) / dt + 1e-9)
+            if steps > 0:
+                model.step(steps)
+                self._battery.update(steps * dt, self.commander.armed, not model.status().landed)
+                if self._video is not None:
+                    self._video.capture()
+            self.commander.update()
+            # 2. messages in, replies to their sender
+            for msg, addr in link.receive():
+                for reply in handler.handle(msg):
+                    link.send(reply, to=addr)
+            # 3. telemetry and status texts to every destination
+            due = scheduler.due(now)
+            self._snapshot = snap = self._take_snapshot()
+            for msg_id in due:
+                link.send(self._builder.build(msg_id, snap))
+            while self.commander.texts:
+                text_id = text_id % 65535 + 1
+                for msg in _statustext(*self.commander.texts.popleft(), text_id):
+                    link.send(msg)
+            with self._stats_lock:
+                st = self._stats
+                st.iterations += 1
+                st.physics_steps += steps
+                st.dropped_sim_s += dropped
+                st.wall_s = time.monotonic() - start_wall
+                st.sim_s = model.time_s - sim0
+                st.messages_in, st.messages_out = link.stats.received, link.stats.sent
+            # 4. sleep until the next physics step or telemetry is due, or a message arrives
+            wake = min(wall0 + (model.time_s + dt - sim0) / cfg.speed, scheduler.next_due_s())
+            select.select([link], [], [], min(max(wake - time.monotonic(), _MIN_WAIT_S), _MAX_WAIT_S))
+
+    def _take_snapshot(self) -> VehicleSnapshot:
+        c, b = self.commander, self._battery
+        return VehicleSnapshot(
+            time_boot_ms=round((self._model.time_s - self._boot_s) * 1000),
+            kinematics=self._model.kinematics(),
+            armed=c.armed,
+            mode=c.mode,
+            system_status=c.system_status,
+            landed_state=c.landed_state,
+            prearm_ok=c.prearm_ok,
+            battery_remaining=b.remaining,
+            battery_voltage_v=b.voltage_v,
+            battery_current_a=b.current_a,
+            battery_consumed_mah=b.consumed_mah,
+        )
+
+
+def _statustext(severity: int, text: str, text_id: int) -> list[mavlink.MAVLink_message]:
+    """STATUSTEXT messages for `text`: one, or MAVLink 2 chunks (`text_id`, chunk_seq) beyond 50 bytes."""
+    data = text.encode("utf-8", errors="replace")
+    if len(data) <= _STATUSTEXT_CHUNK:
+        return [mavlink.MAVLink_statustext_message(severity, data)]
+    chunks = [data[i : i + _STATUSTEXT_CHUNK] for i in range(0, len(data), _STATUSTEXT_CHUNK)]
+    return [mavlink.MAVLink_statustext_message(severity, c, text_id, i) for i, c in enumerate(chunks)]
