@@ -63,8 +63,8 @@ class BenchmarkConfig:
     scale_moves: bool = True
     """The loop's move scheme: scaled with the detector's offset (default) or the paper's fixed lengths."""
     parallel: int = 1
-    udp_port_base: int = 14860
-    http_port_base: int = 18860
+    udp_port_base: int = 15400  # 15400-15479: clear of the tests' fixed ports (146xx-150xx)
+    http_port_base: int = 19400
     px4_dir: str | None = None
     """PX4 SITL build folder for `px4-sitl` (None: $PX4_SITL_DIR)."""
     px4_speed: float | str = "max"
