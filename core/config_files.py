@@ -13,7 +13,13 @@ from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
 import yaml
-from pydantic import AfterValidator, BaseModel, ValidationError
+from pydantic import AfterValidator, BaseModel, ConfigDict, ValidationError
+
+
+class StrictModel(BaseModel):
+    """A config model, frozen, that refuses unknown keys (a misspelt key must never be silently ignored)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
 
 
 class ConfigFileError(ValueError):

@@ -26,15 +26,11 @@ from __future__ import annotations
 
 import logging
 import math
-import threading
 import time
-from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
-from mavsdk import ComponentType, Configuration, ConnectionResult, Mavsdk, log_subscribe
-from mavsdk.logging import LogLevel
+from mavsdk import ComponentType, Configuration, ConnectionResult, Mavsdk
 from mavsdk.plugins.action import Action, ActionError, ActionResult
 from mavsdk.plugins.offboard import Offboard, OffboardError, VelocityBodyYawspeed
 from mavsdk.plugins.telemetry import Telemetry as MavsdkTelemetry
@@ -46,79 +42,15 @@ from flight.errors import (
     OffboardInterruptedError,
     VehicleConnectionError,
 )
-from flight.link import LinkMonitor
-from flight.safety import FlightTimeouts
-from flight.types import Attitude, FlightMode, PositionNed, Telemetry, VelocityBody, VelocityNed
-from flight.urls import validate_connection_url
+from flight.mavsdk_link import MavsdkConfig, TelemetryCache, resend_on_timeout, route_mavsdk_logs
+from flight.types import FlightMode, Telemetry, VelocityBody
 from flight.vehicle import Vehicle, wait_for
 
 log = logging.getLogger(__name__)
 
 _RETRY_ARM = {ActionResult.COMMAND_DENIED, ActionResult.BUSY, ActionResult.TIMEOUT, ActionResult.FAILED}
-_NAN3 = (math.nan, math.nan, math.nan)
 READY_REPORT_EVERY_S = 5.0
 DISARM_RACE_WAIT_S = 3.0
-
-
-@dataclass(frozen=True)
-class MavsdkConfig:
-    """How to reach the vehicle and how long to wait for it."""
-
-    url: str = "udpin://0.0.0.0:14540"
-    timeouts: FlightTimeouts = field(default_factory=FlightTimeouts)
-    link_timeout_s: float = 2.0
-    arm_retry_period_s: float = 0.5
-    altitude_tolerance_m: float = 0.3
-    climb_done_speed_m_s: float = 0.2  # takeoff ends when the climb has (nearly) stopped
-    poll_s: float = 0.02
-    expected_system_id: int | None = None
-    shown_url: str | None = None
-    """The vehicle's URL as the user gave it, for messages, when MAVSDK listens behind a relay elsewhere."""
-    clock: str = "wall"  # or "vehicle": the autopilot's clock (see the module docstring)
-
-    def __post_init__(self) -> None:
-        validate_connection_url(self.url)
-        if self.clock not in ("wall", "vehicle"):
-            raise ValueError(f"MavsdkConfig.clock must be 'wall' or 'vehicle', got {self.clock!r}")
-        if self.expected_system_id is not None and not 1 <= self.expected_system_id <= 255:
-            raise ValueError(f"MavsdkConfig.expected_system_id must be 1..255, got {self.expected_system_id}")
-        if not (self.link_timeout_s > 0 and self.arm_retry_period_s > 0 and self.poll_s > 0):
-            raise ValueError("MavsdkConfig: link_timeout_s, arm_retry_period_s and poll_s must be > 0")
-
-
-COMMAND_ATTEMPTS = 3
-
-
-def _resend_on_timeout(call: Callable[[], Any], attempts: int = COMMAND_ATTEMPTS) -> Any:
-    """Run a MAVSDK command, sending it again when it timed out (every ack lost on a lossy link).
-
-    MAVSDK already resends a command four times, 0.5 s apart, before TIMEOUT; on a radio that
-    loses a fifth of the packets each way that still fails about once in 170 commands. These
-    commands (takeoff, hold, land, disarm, offboard start/stop) are idempotent on PX4, so sending
-    them again is safe. Any other result is raised at once.
-    """
-    for attempt in range(1, attempts + 1):
-        try:
-            return call()
-        except (ActionError, OffboardError) as exc:
-            if exc.result.name != "TIMEOUT" or attempt == attempts:
-                raise
-            log.warning(
-                "%s timed out (no ack): sending it again (%d of %d)", exc.origin, attempt + 1, attempts
-            )
-    return None
-
-
-def _route_mavsdk_logs() -> None:
-    """Send the C library's log lines to Python logging instead of coloured stderr."""
-    mavsdk_log = logging.getLogger("mavsdk")
-    levels = {LogLevel.DEBUG: logging.DEBUG, LogLevel.INFO: logging.INFO, LogLevel.WARN: logging.WARNING}
-
-    def forward(level: LogLevel, message: str, _file: str | None, _line: int) -> bool:
-        mavsdk_log.log(levels.get(level, logging.ERROR), "%s", message)
-        return True
-
-    log_subscribe(forward)
 
 
 class MavsdkVehicle(Vehicle):
@@ -129,20 +61,8 @@ class MavsdkVehicle(Vehicle):
     def __init__(self, config: MavsdkConfig | None = None) -> None:
         self.config = config or MavsdkConfig()
         self.setpoints_sent = 0
-        self._lock = threading.Lock()
-        self._position: tuple[float, float, float] = _NAN3
-        self._velocity: tuple[float, float, float] = _NAN3
-        self._attitude: tuple[float, float, float] = _NAN3
-        self._armed = False
-        self._in_air = False
-        self._mode = FlightMode.UNKNOWN
-        self._battery_percent: float | None = None
-        self._local_position_ok = False
-        self._home_ok = False
-        self._texts: deque[str] = deque(maxlen=100)
-        self._texts_received = 0  # all STATUSTEXTs so far (the deque keeps the latest only)
-        self._texts_at_offboard = 0  # the count when offboard was confirmed
-        self._link = LinkMonitor(self.config.link_timeout_s)
+        self._cache = TelemetryCache(self.config.link_timeout_s)
+        self._texts_at_offboard = 0  # the STATUSTEXT count when offboard was confirmed
         self._mavsdk: Mavsdk | None = None
         self._system: Any = None
         self._telemetry: MavsdkTelemetry | None = None
@@ -151,7 +71,6 @@ class MavsdkVehicle(Vehicle):
         self._setpoint_set = False
         self._in_offboard = False
         self._ground_down_m = math.nan
-        self._vehicle_time_s = math.nan  # the autopilot's clock, from its ATTITUDE timestamps
 
     # --- connection ---------------------------------------------------------------------------
     def connect(self, timeout_s: float | None = None) -> None:
@@ -159,7 +78,7 @@ class MavsdkVehicle(Vehicle):
             return
         timeout_s = timeout_s or self.config.timeouts.connect_s
         url = self.config.url
-        _route_mavsdk_logs()
+        route_mavsdk_logs()
         self._mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
         result = self._mavsdk.add_any_connection(url)
         if result != ConnectionResult.SUCCESS:
@@ -184,17 +103,17 @@ class MavsdkVehicle(Vehicle):
                 "running and sending to this address and port? (PX4 SITL and `dronectl sim-vehicle` send "
                 "to 14540 by default)",
             )
-        self._link = LinkMonitor(self.config.link_timeout_s)
+        self._cache = TelemetryCache(self.config.link_timeout_s)
         # Keep every MAVSDK object referenced for the connection's life: a plugin left to the
         # garbage collector is destroyed with its subscriptions, and telemetry silently stops.
         self._system = system
         self._telemetry = MavsdkTelemetry(system)
         self._action = Action(system)
         self._offboard = Offboard(system)
-        self._subscribe(system, self._telemetry)
+        self._cache.subscribe(system, self._telemetry)
         if self.config.clock == "vehicle":
             deadline = time.monotonic() + timeout_s
-            while math.isnan(self._vehicle_time_s):
+            while math.isnan(self._cache.vehicle_time_s):
                 if time.monotonic() > deadline:
                     self.close()
                     raise VehicleConnectionError(
@@ -231,82 +150,26 @@ class MavsdkVehicle(Vehicle):
             )
         return None
 
-    def _subscribe(self, system: Any, tel: MavsdkTelemetry) -> None:
-        def store(fn: Callable[[Any], None]) -> Callable[[Any, Any], None]:
-            def callback(data: Any, _user_data: Any) -> None:
-                with self._lock:
-                    fn(data)
-                self._link.heard()
-
-            return callback
-
-        def pos_vel(d: Any) -> None:
-            self._position = (d.position.north_m, d.position.east_m, d.position.down_m)
-            self._velocity = (d.velocity.north_m_s, d.velocity.east_m_s, d.velocity.down_m_s)
-
-        def attitude(d: Any) -> None:
-            self._attitude = (d.roll_deg, d.pitch_deg, d.yaw_deg)
-            stamp_s = d.timestamp_us * 1e-6 if d.timestamp_us else math.nan
-            if not stamp_s <= self._vehicle_time_s:  # the first stamp, or a newer one (never backwards)
-                self._vehicle_time_s = stamp_s
-
-        def health(d: Any) -> None:
-            self._local_position_ok, self._home_ok = d.is_local_position_ok, d.is_home_position_ok
-
-        def battery(d: Any) -> None:
-            self._battery_percent = None if math.isnan(d.remaining_percent) else d.remaining_percent
-
-        tel.subscribe_position_velocity_ned(store(pos_vel))
-        tel.subscribe_attitude_euler(store(attitude))
-        tel.subscribe_armed(store(lambda d: setattr(self, "_armed", bool(d))))
-        tel.subscribe_in_air(store(lambda d: setattr(self, "_in_air", bool(d))))
-        tel.subscribe_flight_mode(
-            store(lambda d: setattr(self, "_mode", FlightMode.__members__.get(d.name, FlightMode.OTHER)))
-        )
-        tel.subscribe_health(store(health))
-        tel.subscribe_battery(store(battery))
-
-        def status_text(d: Any) -> None:
-            self._texts.append(f"{d.type.name}: {d.text}")
-            self._texts_received += 1
-
-        tel.subscribe_status_text(store(status_text))
-        system.subscribe_is_connected(lambda connected, _ud: self._link.set_connected(bool(connected)))
-
     # --- telemetry ----------------------------------------------------------------------------
     def telemetry(self) -> Telemetry:
-        self._link.check("telemetry()")
-        with self._lock:
-            return Telemetry(
-                position_ned=PositionNed(*self._position),
-                velocity_ned=VelocityNed(*self._velocity),
-                attitude=Attitude(*self._attitude),
-                armed=self._armed,
-                in_air=self._in_air,
-                flight_mode=self._mode,
-                timestamp_s=self.time_s(),
-                battery_remaining_percent=self._battery_percent,
-            )
+        self._cache.link.check("telemetry()")
+        return self._cache.snapshot(self.time_s())
 
     def status_texts(self) -> list[str]:
-        with self._lock:
-            return list(self._texts)
+        return self._cache.all_texts()
 
     def _last_text(self) -> str:
-        with self._lock:
-            return self._texts[-1] if self._texts else ""
+        return self._cache.last_text()
 
     def _texts_since_offboard(self) -> str:
-        """What the vehicle said since offboard began ("; "-joined): a failsafe sends several texts,
-        and the one naming the cause ("No offboard signal") need not be the last by the time the
-        heartbeat shows the mode change."""
-        with self._lock:
-            new = min(self._texts_received - self._texts_at_offboard, len(self._texts))
-            return "; ".join(list(self._texts)[len(self._texts) - new :]) if new > 0 else ""
+        """What the vehicle said since offboard began: a failsafe sends several texts, and the one
+        naming the cause ("No offboard signal") need not be the last by the time the heartbeat
+        shows the mode change."""
+        return self._cache.texts_since(self._texts_at_offboard)
 
     def time_s(self) -> float:
         if self.config.clock == "vehicle":
-            return self._vehicle_time_s  # one float, written whole by the MAVSDK thread: no lock needed
+            return self._cache.vehicle_time_s  # one float, written whole by the MAVSDK thread: no lock needed
         return time.monotonic()
 
     def sleep(self, seconds: float) -> None:
@@ -315,7 +178,7 @@ class MavsdkVehicle(Vehicle):
             return
         until = self.time_s() + seconds
         while self.time_s() < until:
-            self._link.check("sleep()")  # a frozen vehicle clock ends here, as a lost link
+            self._cache.link.check("sleep()")  # a frozen vehicle clock ends here, as a lost link
             time.sleep(0.002)
 
     def _wait(
@@ -332,8 +195,8 @@ class MavsdkVehicle(Vehicle):
 
         def ready(t: Telemetry) -> bool:
             nonlocal next_report
-            with self._lock:
-                position_ok, home_ok = self._local_position_ok, self._home_ok
+            with self._cache.lock:
+                position_ok, home_ok = self._cache.local_position_ok, self._cache.home_ok
             ok = position_ok and home_ok and math.isfinite(t.position_ned.down_m)
             ok = ok and math.isfinite(t.attitude.yaw_deg)
             if not ok and self.time_s() >= next_report:
@@ -357,7 +220,7 @@ class MavsdkVehicle(Vehicle):
             log.info("disarmed in OFFBOARD (PX4 reverted to it after the last flight): switching to Hold")
             self.hold()
         while True:
-            self._link.check("arm()")
+            self._cache.link.check("arm()")
             try:
                 action.arm()
                 break
@@ -375,8 +238,8 @@ class MavsdkVehicle(Vehicle):
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise ValueError(f"takeoff altitude must be a positive number of metres, got {altitude_m!r}")
         try:
-            _resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m))
-            _resend_on_timeout(action.takeoff)
+            resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m))
+            resend_on_timeout(action.takeoff)
         except ActionError as exc:
             armed = self.telemetry().armed
             detail = self._last_text() or ("the vehicle is not armed" if not armed else "")
@@ -428,12 +291,12 @@ class MavsdkVehicle(Vehicle):
                 "set a velocity setpoint first: PX4 needs a setpoint stream",
             )
         try:
-            _resend_on_timeout(offboard.start)
+            resend_on_timeout(offboard.start)
         except OffboardError as exc:
             raise CommandDeniedError("start_offboard()", exc.result.name, self._last_text()) from None
         self._confirm_mode(FlightMode.OFFBOARD, timeout_s, "start_offboard()")
-        with self._lock:
-            self._texts_at_offboard = self._texts_received
+        with self._cache.lock:
+            self._texts_at_offboard = self._cache.texts_received
         self._in_offboard = True
 
     def hold(self) -> None:
@@ -443,7 +306,7 @@ class MavsdkVehicle(Vehicle):
         self._in_offboard = False
         action = self._require(self._action, "hold()")
         try:
-            _resend_on_timeout(action.hold)
+            resend_on_timeout(action.hold)
         except ActionError as exc:
             raise CommandDeniedError("hold()", exc.result.name, self._last_text()) from None
         self._confirm_mode(FlightMode.HOLD, None, "hold()")
@@ -454,7 +317,7 @@ class MavsdkVehicle(Vehicle):
         if self.telemetry().flight_mode != FlightMode.OFFBOARD:
             return
         try:
-            _resend_on_timeout(offboard.stop)
+            resend_on_timeout(offboard.stop)
         except OffboardError as exc:
             raise CommandDeniedError("stop_offboard()", exc.result.name, self._last_text()) from None
         self._confirm_mode(FlightMode.HOLD, timeout_s, "stop_offboard()")
@@ -465,7 +328,7 @@ class MavsdkVehicle(Vehicle):
             self.stop_offboard()
         self._in_offboard = False
         try:
-            _resend_on_timeout(action.land)
+            resend_on_timeout(action.land)
         except ActionError as exc:
             raise CommandDeniedError("land()", exc.result.name, self._last_text()) from None
         self._wait(lambda t: not t.in_air, timeout_s or self.config.timeouts.land_s, "land()", "landed state")
@@ -475,7 +338,7 @@ class MavsdkVehicle(Vehicle):
         if not self.telemetry().armed:
             return
         try:
-            _resend_on_timeout(action.disarm)
+            resend_on_timeout(action.disarm)
         except ActionError as exc:
             # PX4's auto-disarm may have won the race (its ack lost, or telemetry a heartbeat late):
             # that is success, so give telemetry a moment to say so before calling it a failure.

@@ -39,7 +39,7 @@ from perception.detector_data import (
 )
 from perception.detector_eval import DetectorMetrics, evaluate_detections, evaluate_on_dataset
 from perception.detector_model import STRIDE, CentreNet, DetectorConfig
-from perception.errors import CheckpointError
+from perception.errors import DetectorCheckpointError
 from perception.image_detector import ImageDetector, load_model, normalise, save_checkpoint
 
 log = logging.getLogger(__name__)
@@ -269,7 +269,7 @@ def train_detector(config: TrainDetectorConfig) -> TrainDetectorResult:
     if config.init_dir is not None:
         start_from = load_model(config.init_dir)
         if start_from.config != config.detector:
-            raise CheckpointError(
+            raise DetectorCheckpointError(
                 config.init_dir, f"its detector config {start_from.config} differs from {config.detector}"
             )
         model.load_state_dict(start_from.state_dict())

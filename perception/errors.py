@@ -44,17 +44,9 @@ class CameraClosedError(CameraError):
     """`read()` was called on a camera after `close()`."""
 
 
-class CheckpointError(PerceptionError):
+class DetectorCheckpointError(PerceptionError):
     """A detector checkpoint is missing, corrupt or does not match its config."""
 
     def __init__(self, path: object, message: str) -> None:
         super().__init__(f"detector checkpoint {path}: {message}")
-        self.path = path
-
-
-class DatasetError(PerceptionError):
-    """A dataset folder is missing files or holds a malformed manifest row."""
-
-    def __init__(self, path: object, message: str) -> None:
-        super().__init__(f"dataset {path}: {message}")
         self.path = path

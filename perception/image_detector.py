@@ -26,7 +26,7 @@ import torch
 from safetensors.torch import load_file, save_file
 
 from perception.detector_model import EDGE_SCALE_PX, STRIDE, CentreNet, DetectorConfig, fuse_for_inference
-from perception.errors import CheckpointError
+from perception.errors import DetectorCheckpointError
 from perception.types import Detection
 
 log = logging.getLogger(__name__)
@@ -52,25 +52,25 @@ def save_checkpoint(run_dir: Path, model: CentreNet, extra: dict[str, object] | 
 
 
 def load_config(run_dir: Path) -> DetectorConfig:
-    """The detector config of a run folder; CheckpointError naming the file on any problem."""
+    """The detector config of a run folder; DetectorCheckpointError naming the file on any problem."""
     path = run_dir / CONFIG_FILE
     try:
         payload = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        raise CheckpointError(
+        raise DetectorCheckpointError(
             path, "missing (is this a folder written by `dronectl train-detector`?)"
         ) from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise CheckpointError(path, f"unreadable: {exc}") from None
+        raise DetectorCheckpointError(path, f"unreadable: {exc}") from None
     if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
         got = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
-        raise CheckpointError(path, f"field 'format' must be {CHECKPOINT_FORMAT!r}, got {got!r}")
+        raise DetectorCheckpointError(path, f"field 'format' must be {CHECKPOINT_FORMAT!r}, got {got!r}")
     if not isinstance(payload.get("detector"), dict):
-        raise CheckpointError(path, "field 'detector' is missing or not an object")
+        raise DetectorCheckpointError(path, "field 'detector' is missing or not an object")
     try:
         return DetectorConfig.from_json_dict(payload["detector"])
     except (TypeError, ValueError) as exc:
-        raise CheckpointError(path, f"field 'detector': {exc}") from None
+        raise DetectorCheckpointError(path, f"field 'detector': {exc}") from None
 
 
 def load_model(run_dir: str | Path) -> CentreNet:
@@ -79,19 +79,19 @@ def load_model(run_dir: str | Path) -> CentreNet:
     config = load_config(root)
     path = root / WEIGHTS_FILE
     if not path.is_file():
-        raise CheckpointError(path, "missing")
+        raise DetectorCheckpointError(path, "missing")
     try:
         state = load_file(str(path))
     except Exception as exc:  # safetensors raises its own SafetensorError, OSError, ...
-        raise CheckpointError(path, f"corrupt or not a safetensors file: {exc}") from None
+        raise DetectorCheckpointError(path, f"corrupt or not a safetensors file: {exc}") from None
     model = CentreNet(config)
     try:
         model.load_state_dict(state, strict=True)
     except RuntimeError as exc:
         first = str(exc).strip().splitlines()
-        raise CheckpointError(path, f"does not match {CONFIG_FILE}: {' '.join(first[:3])}") from None
+        raise DetectorCheckpointError(path, f"does not match {CONFIG_FILE}: {' '.join(first[:3])}") from None
     if not all(torch.isfinite(t).all() for t in state.values() if t.is_floating_point()):
-        raise CheckpointError(path, "holds NaN or infinite weights")
+        raise DetectorCheckpointError(path, "holds NaN or infinite weights")
     return model.eval()
 
 

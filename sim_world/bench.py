@@ -14,15 +14,13 @@ them so that noisy numbers can be recognised as such.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
-import json
 import os
 import resource
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -218,62 +216,3 @@ def run_sim_bench(settings: SimBenchSettings) -> dict[str, Any]:
         "collection_224": collection,
         "targets": TARGETS,
     }
-
-
-def format_report(result: dict[str, Any]) -> str:
-    """The human-readable report of `run_sim_bench`'s result."""
-
-    def verdict(value: float, key: str) -> str:
-        return f"target >= {TARGETS[key]:g}: " + ("meets" if value >= TARGETS[key] else "BELOW")
-
-    m, cam = result["machine"], result["physics_camera"]
-    phys = result["physics_no_camera"]["real_time_factor"]
-    inline = cam["real_time_factor"]
-    parallel = result["physics_camera_render_workers"]
-    rtf_workers = parallel["real_time_factor"]
-    coll = result["collection_224"]
-    camera = f"{cam['camera_px']} px camera @ {cam['camera_hz']:g} Hz"
-    lines = [
-        f"machine: {m['cpus']} CPUs, load average {m['load_avg_1min_before']:.2f} before, "
-        f"{m['load_avg_1min_after']:.2f} after (other work on the machine slows every number)",
-        f"physics, no camera:                 {phys:6.1f}x real time ({verdict(phys, 'physics_rtf')}); "
-        f"by CPU time {result['physics_no_camera']['cpu_real_time_factor']:.1f}x",
-        f"physics + {camera}, inline: {inline:6.2f}x real time ({verdict(inline, 'camera_rtf')}); "
-        f"by CPU time {cam['cpu_real_time_factor']:.2f}x",
-        f"physics + {camera}, {parallel['workers']} render workers: {rtf_workers:.2f}x real time "
-        f"({verdict(rtf_workers, 'camera_rtf')})",
-        "render per frame (ms)   p50 no-seg  p99 no-seg   p50 seg   p99 seg   CPU p50 no-seg",
-    ]
-    for size, row in result["render_ms"].items():
-        lines.append(
-            f"  {size:>4} px            {row['p50_ms_no_seg']:9.2f}  {row['p99_ms_no_seg']:10.2f}"
-            f"  {row['p50_ms_seg']:8.2f}  {row['p99_ms_seg']:8.2f}  {row['cpu_p50_ms_no_seg']:14.2f}"
-        )
-    lines.append(
-        f"collection at 224 px: {coll['images_per_s']:.1f} images/s ({coll['images']:.0f} images, "
-        f"{coll['workers']:.0f} workers; {verdict(coll['images_per_s'], 'collect_images_per_s')}); "
-        f"{coll['images_per_cpu_s']:.1f} images per CPU second"
-    )
-    return "\n".join(lines)
-
-
-def bench_main(argv: list[str]) -> int:
-    """Entry point of `dronectl bench sim` (called by tools/bench_cmd.py)."""
-    parser = argparse.ArgumentParser(
-        prog="dronectl bench sim", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument("--json", type=Path, default=None, help="also write the numbers to this JSON file")
-    parser.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
-    parser.add_argument("--collect-images", type=int, default=400, help="images for the throughput run")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="collection workers")
-    args = parser.parse_args(argv)
-    settings = replace(
-        SimBenchSettings(), seed=args.seed, collect_images=args.collect_images, collect_workers=args.workers
-    )
-    result = run_sim_bench(settings)
-    print(format_report(result))
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
-        print(f"wrote {args.json}")
-    return 0

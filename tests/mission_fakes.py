@@ -1,10 +1,9 @@
 """Fakes for unit tests of the centring loop and the mission runner (not for anything else).
 
-`FakeVehicle` is a kinematic point: a velocity setpoint moves it exactly, `hold()`
-stops it, time advances only in `sleep()`. `FakeCamera` returns blank frames and
-`FakeDetector` derives the target's pixel position from the fake vehicle's
-position by a pinhole relation, so the loop can be run closed-loop without
-physics or rendering. `FakePlanner` replays a script of actions.
+With `fake_vehicle.FakeVehicle.at_pose` (a kinematic point in front of the target),
+`FakeCamera` returns blank frames and `FakeDetector` derives the target's pixel position
+from the fake vehicle's position by a pinhole relation, so the loop can be run
+closed-loop without physics or rendering. `FakePlanner` replays a script of actions.
 """
 
 from __future__ import annotations
@@ -12,102 +11,15 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 
 import numpy as np
+from fake_vehicle import FakeVehicle
 
 from controller.planning.actions import ALL_ACTIONS, Action
 from controller.planning.planners import Observation, Plan
-from flight.types import (
-    Attitude,
-    FlightMode,
-    PositionNed,
-    Telemetry,
-    VelocityBody,
-    VelocityNed,
-)
-from flight.vehicle import Vehicle
 from perception.camera import Camera
 from perception.types import Detection, Frame
 
 IMAGE_SIZE = 224
 PX_PER_M = 97.0  # a 60° camera 2 m from the wall: fx / distance = 194 / 2
-
-
-class FakeVehicle(Vehicle):
-    """A kinematic point vehicle facing north. `fail_on_move` raises on that velocity command (1-based)."""
-
-    realtime = False
-
-    def __init__(self, east_m: float = 0.0, up_m: float = 0.0, fail_on_move: int | None = None) -> None:
-        self.east_m, self.up_m = east_m, up_m
-        self.velocity = VelocityBody()
-        self.clock_s = 0.0
-        self.calls: list[str] = []
-        self.in_air = False
-        self.armed = False
-        self.fail_on_move = fail_on_move
-        self.moves_commanded = 0
-
-    def connect(self, timeout_s: float | None = None) -> None:
-        self.calls.append("connect")
-
-    def wait_ready(self, timeout_s: float | None = None) -> None:
-        self.calls.append("wait_ready")
-
-    def arm(self, timeout_s: float | None = None) -> None:
-        self.calls.append("arm")
-        self.armed = True
-
-    def takeoff(self, altitude_m: float, timeout_s: float | None = None) -> None:
-        self.calls.append("takeoff")
-        self.in_air = True
-
-    def start_offboard(self, timeout_s: float | None = None) -> None:
-        self.calls.append("start_offboard")
-
-    def set_velocity_body(self, velocity: VelocityBody) -> None:
-        if not velocity.is_zero() and velocity != self.velocity:
-            self.moves_commanded += 1
-            if self.fail_on_move is not None and self.moves_commanded >= self.fail_on_move:
-                raise RuntimeError("FakeVehicle: simulated link failure")
-        self.velocity = velocity
-
-    def hold(self) -> None:
-        self.calls.append("hold")
-        self.velocity = VelocityBody()
-
-    def stop_offboard(self, timeout_s: float | None = None) -> None:
-        self.calls.append("stop_offboard")
-        self.velocity = VelocityBody()
-
-    def land(self, timeout_s: float | None = None) -> None:
-        self.calls.append("land")
-        self.in_air = False
-
-    def disarm(self, timeout_s: float | None = None) -> None:
-        self.calls.append("disarm")
-        self.armed = False
-
-    def telemetry(self) -> Telemetry:
-        v = self.velocity
-        return Telemetry(
-            position_ned=PositionNed(0.0, self.east_m, -self.up_m),
-            velocity_ned=VelocityNed(v.forward_m_s, v.right_m_s, v.down_m_s),
-            attitude=Attitude(0.0, 0.0, 0.0),
-            armed=self.armed,
-            in_air=self.in_air,
-            flight_mode=FlightMode.OFFBOARD,
-            timestamp_s=self.clock_s,
-        )
-
-    def time_s(self) -> float:
-        return self.clock_s
-
-    def sleep(self, seconds: float) -> None:
-        self.clock_s += seconds
-        self.east_m += self.velocity.right_m_s * seconds
-        self.up_m -= self.velocity.down_m_s * seconds
-
-    def close(self) -> None:
-        self.calls.append("close")
 
 
 class FakeCamera(Camera):

@@ -3,16 +3,18 @@
 from __future__ import annotations
 
 import pytest
-from mission_fakes import PX_PER_M, FakeCamera, FakeDetector, FakePlanner, FakeVehicle
+from fake_vehicle import FakeVehicle
+from mission_fakes import PX_PER_M, FakeCamera, FakeDetector, FakePlanner
 
 from controller.planning.loop import (
     CentringConfig,
     CentringLoop,
     MoveSchedule,
     Outcome,
-    default_stop_margin_px,
 )
 from controller.planning.planners import ClassicPlanner
+from core.centring import default_stop_margin_px
+from flight.types import VelocityBody
 
 RIGHT, LEFT, UP, DOWN, NONE, RIGHT_UP = 7, 1, 3, 5, 4, 6
 EPSILON = 10.0
@@ -31,7 +33,7 @@ def make_loop(vehicle: FakeVehicle, planner, detector: FakeDetector | None = Non
 
 
 def test_stops_at_once_when_already_centred() -> None:
-    vehicle = FakeVehicle(east_m=0.05, up_m=-0.05)  # 4.9 px off on each axis: inside ε
+    vehicle = FakeVehicle.at_pose(east_m=0.05, up_m=-0.05)  # 4.9 px off on each axis: inside ε
     planner = FakePlanner([RIGHT])
     result = make_loop(vehicle, planner).run()
     assert result.outcome is Outcome.CENTRED
@@ -41,7 +43,7 @@ def test_stops_at_once_when_already_centred() -> None:
 
 
 def test_classic_planner_closes_the_loop_to_within_epsilon_with_fixed_moves() -> None:
-    vehicle = FakeVehicle(east_m=-1.0, up_m=0.6)  # target 97 px right, 58 px below centre
+    vehicle = FakeVehicle.at_pose(east_m=-1.0, up_m=0.6)  # target 97 px right, 58 px below centre
     result = make_loop(vehicle, ClassicPlanner(), scale_moves=False).run()
     assert result.outcome is Outcome.CENTRED
     du, dv = result.steps[-1].truth_offset_px
@@ -53,20 +55,20 @@ def test_classic_planner_closes_the_loop_to_within_epsilon_with_fixed_moves() ->
 
 
 def test_scaled_moves_turn_the_pixel_offset_into_metres_and_save_steps() -> None:
-    fixed = make_loop(FakeVehicle(east_m=-1.0, up_m=0.6), ClassicPlanner(), scale_moves=False).run()
-    vehicle = FakeVehicle(east_m=-1.0, up_m=0.6)  # 97 px right, 58.2 px below
+    fixed = make_loop(FakeVehicle.at_pose(east_m=-1.0, up_m=0.6), ClassicPlanner(), scale_moves=False).run()
+    vehicle = FakeVehicle.at_pose(east_m=-1.0, up_m=0.6)  # 97 px right, 58.2 px below
     result = make_loop(vehicle, ClassicPlanner(), move_gain=0.8, assumed_distance_m=2.0).run()
     assert result.outcome is Outcome.CENTRED
     # f = 112 / tan(30°) = 194 px; at the assumed 2 m, 1 px = 2/194 m; times the gain 0.8.
     metres_per_px = 0.8 * 2.0 / 193.99
     assert result.steps[0].move_m == pytest.approx((97.0 * metres_per_px, -58.2 * metres_per_px), rel=1e-3)
     assert result.moves < fixed.moves
-    capped = make_loop(FakeVehicle(east_m=-1.0), ClassicPlanner(), max_move_m=0.5).run()
+    capped = make_loop(FakeVehicle.at_pose(east_m=-1.0), ClassicPlanner(), max_move_m=0.5).run()
     assert capped.steps[0].move_m == pytest.approx((0.5, 0.0))
 
 
 def test_scaled_move_against_the_detector_is_the_minimum() -> None:
-    vehicle = FakeVehicle(east_m=-0.5)  # target 48.5 px right; the planner says left
+    vehicle = FakeVehicle.at_pose(east_m=-0.5)  # target 48.5 px right; the planner says left
     result = make_loop(vehicle, FakePlanner([LEFT, RIGHT]), max_steps=2).run()
     assert result.steps[0].move_m == pytest.approx((-0.05, 0.0))
     assert result.steps[1].move_m[0] == pytest.approx(0.8 * 53.35 * 2 / 193.99, rel=1e-3)
@@ -76,7 +78,7 @@ def test_stops_only_within_the_margin_so_a_biased_detector_still_ends_within_eps
     # The detector sees the target 1.9 px further left than it is: stopping at ε per detector would end
     # up to 11.9 px off per truth; the 2 px margin keeps the truth within ε.
     for start_east_m in (-0.8, -0.6, 0.45, 0.7):
-        vehicle = FakeVehicle(east_m=start_east_m, up_m=0.2)
+        vehicle = FakeVehicle.at_pose(east_m=start_east_m, up_m=0.2)
         detector = FakeDetector(vehicle, bias_px=(-1.9, 1.9))
         result = make_loop(vehicle, ClassicPlanner(), detector, scale_moves=False).run()
         assert result.outcome is Outcome.CENTRED
@@ -87,7 +89,9 @@ def test_stops_only_within_the_margin_so_a_biased_detector_still_ends_within_eps
 
 
 def test_a_no_move_at_the_boundary_gets_a_bounded_refinement_move() -> None:
-    vehicle = FakeVehicle(east_m=-0.095)  # 9.2 px right: within ε, not within the stop threshold of 8 px
+    vehicle = FakeVehicle.at_pose(
+        east_m=-0.095
+    )  # 9.2 px right: within ε, not within the stop threshold of 8 px
     result = make_loop(vehicle, FakePlanner([NONE])).run()
     assert result.outcome is Outcome.CENTRED
     refinement = result.steps[0]
@@ -98,29 +102,31 @@ def test_a_no_move_at_the_boundary_gets_a_bounded_refinement_move() -> None:
 
 
 def test_an_axis_the_planner_leaves_alone_at_the_boundary_is_refined_beside_its_move() -> None:
-    vehicle = FakeVehicle(east_m=-0.4, up_m=0.1)  # 38.8 px right, 9.7 px below: the planner only goes right
+    vehicle = FakeVehicle.at_pose(
+        east_m=-0.4, up_m=0.1
+    )  # 38.8 px right, 9.7 px below: the planner only goes right
     result = make_loop(vehicle, FakePlanner([RIGHT, NONE]), max_steps=1).run()
     first = result.steps[0]
     assert first.event == "refinement" and first.action.name == "right/none"
     assert first.move_m[0] == pytest.approx(0.8 * 38.8 * 2 / 193.99, rel=1e-3)
     assert first.move_m[1] == pytest.approx(-0.05)  # down, towards the target below the centre
-    far = make_loop(FakeVehicle(east_m=-0.4, up_m=0.3), FakePlanner([RIGHT]), max_steps=1).run()
+    far = make_loop(FakeVehicle.at_pose(east_m=-0.4, up_m=0.3), FakePlanner([RIGHT]), max_steps=1).run()
     assert far.steps[0].move_m[1] == 0.0 and far.refinement_moves == 0  # 29 px below: not the boundary
 
 
 def test_refinement_is_bounded_and_no_move_far_from_the_boundary_is_a_stall() -> None:
     # 11.5 px off (inside the band ε + 2 px); the planner insists on "none"; one 1 px refinement is
     # allowed: the target stays outside the stop threshold, so the next "none"s are stalls.
-    vehicle = FakeVehicle(east_m=-0.1186)
+    vehicle = FakeVehicle.at_pose(east_m=-0.1186)
     result = make_loop(vehicle, FakePlanner([NONE]), max_refinements=1, min_move_m=0.01, move_m=0.3).run()
     assert [s.event for s in result.steps] == ["refinement", "stall", "stall", "stall"]
     assert result.outcome is Outcome.PLANNER_STALLED and result.refinement_moves == 1
-    far = make_loop(FakeVehicle(east_m=-0.5), FakePlanner([NONE]), max_stalls=3).run()
+    far = make_loop(FakeVehicle.at_pose(east_m=-0.5), FakePlanner([NONE]), max_stalls=3).run()
     assert far.outcome is Outcome.PLANNER_STALLED and far.refinement_moves == 0 and far.moves == 0
 
 
 def test_respects_the_step_budget() -> None:
-    vehicle = FakeVehicle(east_m=-0.5)  # target right of centre; the planner keeps climbing instead
+    vehicle = FakeVehicle.at_pose(east_m=-0.5)  # target right of centre; the planner keeps climbing instead
     result = make_loop(vehicle, FakePlanner([UP]), max_steps=3, scale_moves=False).run()
     assert result.outcome is Outcome.MAX_STEPS
     assert result.moves == 3
@@ -129,7 +135,7 @@ def test_respects_the_step_budget() -> None:
 
 
 def test_move_length_halves_on_each_reversal_down_to_the_minimum() -> None:
-    vehicle = FakeVehicle(east_m=-1.0)
+    vehicle = FakeVehicle.at_pose(east_m=-1.0)
     script = [RIGHT, RIGHT, LEFT, RIGHT, LEFT, LEFT]
     result = make_loop(
         vehicle, FakePlanner(script), max_steps=len(script), min_move_m=0.05, scale_moves=False
@@ -152,7 +158,7 @@ def test_schedule_keeps_the_axes_independent() -> None:
 
 
 def test_target_lost_holds_and_stops_without_flying_on() -> None:
-    vehicle = FakeVehicle(east_m=-0.5)
+    vehicle = FakeVehicle.at_pose(east_m=-0.5)
     detector = FakeDetector(vehicle, misses=range(1, 100))  # seen once, then never again
     result = make_loop(
         vehicle, FakePlanner([RIGHT]), detector, lost_rereads=2, lost_recoveries=0, scale_moves=False
@@ -161,12 +167,12 @@ def test_target_lost_holds_and_stops_without_flying_on() -> None:
     assert result.moves == 1
     assert [s.event for s in result.steps] == ["", "lost", "lost", "lost"]
     assert vehicle.calls.count("hold") >= 4  # after the move, on each loss, and at the stop
-    assert vehicle.velocity.is_zero()
+    assert vehicle.velocity == [0.0, 0.0, 0.0] and vehicle.setpoint == VelocityBody()
     assert vehicle.east_m == pytest.approx(-0.2)
 
 
 def test_target_lost_recovery_undoes_the_last_move_once() -> None:
-    vehicle = FakeVehicle(east_m=-0.5)
+    vehicle = FakeVehicle.at_pose(east_m=-0.5)
     detector = FakeDetector(vehicle, misses=range(1, 100))
     result = make_loop(
         vehicle, FakePlanner([RIGHT]), detector, lost_rereads=1, lost_recoveries=1, scale_moves=False
@@ -181,7 +187,7 @@ def test_target_lost_recovery_undoes_the_last_move_once() -> None:
 
 
 def test_no_recovery_move_beyond_the_step_budget() -> None:
-    vehicle = FakeVehicle(east_m=-0.5)
+    vehicle = FakeVehicle.at_pose(east_m=-0.5)
     detector = FakeDetector(vehicle, misses=range(1, 100))
     result = make_loop(vehicle, FakePlanner([RIGHT]), detector, lost_rereads=0, max_steps=1).run()
     assert result.outcome is Outcome.TARGET_LOST
@@ -189,7 +195,7 @@ def test_no_recovery_move_beyond_the_step_budget() -> None:
 
 
 def test_recovery_brings_the_target_back_and_the_loop_goes_on() -> None:
-    vehicle = FakeVehicle(east_m=-1.0)  # the first move right is fine; the planner then overshoots up
+    vehicle = FakeVehicle.at_pose(east_m=-1.0)  # the first move right is fine; the planner then overshoots up
     detector = FakeDetector(vehicle, misses=[2])  # one missed frame after the second move
     planner = FakePlanner(lambda obs: ClassicPlanner().plan(obs).action.index)
     result = make_loop(vehicle, planner, detector, lost_rereads=0).run()
@@ -198,7 +204,7 @@ def test_recovery_brings_the_target_back_and_the_loop_goes_on() -> None:
 
 
 def test_planner_choosing_no_move_stalls_out() -> None:
-    vehicle = FakeVehicle(east_m=-0.5)
+    vehicle = FakeVehicle.at_pose(east_m=-0.5)
     result = make_loop(vehicle, FakePlanner([NONE]), max_stalls=3).run()
     assert result.outcome is Outcome.PLANNER_STALLED
     assert len(result.steps) == 3 and result.moves == 0
@@ -206,7 +212,7 @@ def test_planner_choosing_no_move_stalls_out() -> None:
 
 
 def test_every_step_is_recorded_with_pose_distances_and_timing() -> None:
-    vehicle = FakeVehicle(east_m=-0.7, up_m=0.3)
+    vehicle = FakeVehicle.at_pose(east_m=-0.7, up_m=0.3)
     seen = []
     loop = make_loop(vehicle, FakePlanner(lambda obs: ClassicPlanner().plan(obs).action.index))
     loop.on_step = seen.append
@@ -225,7 +231,7 @@ def test_every_step_is_recorded_with_pose_distances_and_timing() -> None:
 
 
 def test_exception_mid_flight_keeps_the_steps_so_far() -> None:
-    vehicle = FakeVehicle(east_m=-1.0, fail_on_move=3)
+    vehicle = FakeVehicle.at_pose(east_m=-1.0, fail_on_move=3)
     loop = make_loop(vehicle, FakePlanner([RIGHT]), scale_moves=False)
     with pytest.raises(RuntimeError, match="simulated link failure"):
         loop.run()

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from flight_fakes import FakeVehicle
+from fake_vehicle import FakeVehicle
 
 from flight.moves import execute_move
 from flight.safe_vehicle import SafeVehicle

@@ -6,7 +6,7 @@ import math
 import time
 
 import pytest
-from flight_fakes import FakeVehicle
+from fake_vehicle import FakeVehicle
 
 from flight.errors import FlightError, GeofenceBreachError
 from flight.safe_vehicle import SafeVehicle

@@ -10,7 +10,7 @@ from safetensors.torch import load_file, save_file
 
 from controller.planning.latent.checkpoint import CONFIG_FILE, WEIGHTS_FILE, load_checkpoint, save_checkpoint
 from controller.planning.latent.config import ModelConfig
-from controller.planning.latent.errors import CheckpointError
+from controller.planning.latent.errors import PlannerCheckpointError
 from controller.planning.latent.instructions import tokenizer_corpus
 from controller.planning.latent.model import LatentDynamicsModel
 from controller.planning.latent.tokenizer import VOCAB_FILE, InstructionTokenizer
@@ -58,14 +58,14 @@ def test_round_trip_gives_identical_outputs(tmp_path: Path) -> None:
 @pytest.mark.parametrize("name", [WEIGHTS_FILE, CONFIG_FILE, VOCAB_FILE])
 def test_missing_file_is_named(ckpt_dir: Path, name: str) -> None:
     (ckpt_dir / name).unlink()
-    with pytest.raises(CheckpointError, match=f"missing: .*{name}"):
+    with pytest.raises(PlannerCheckpointError, match=f"missing: .*{name}"):
         load_checkpoint(ckpt_dir)
 
 
 def test_corrupt_weights_file_is_named(ckpt_dir: Path) -> None:
     data = (ckpt_dir / WEIGHTS_FILE).read_bytes()
     (ckpt_dir / WEIGHTS_FILE).write_bytes(b"\x00\x01garbage" + data[100:])
-    with pytest.raises(CheckpointError, match=f"cannot read .*{WEIGHTS_FILE}"):
+    with pytest.raises(PlannerCheckpointError, match=f"cannot read .*{WEIGHTS_FILE}"):
         load_checkpoint(ckpt_dir)
 
 
@@ -73,7 +73,7 @@ def test_tampered_tensor_shape_is_named(ckpt_dir: Path) -> None:
     tensors = load_file(str(ckpt_dir / WEIGHTS_FILE))
     tensors["fuse.weight"] = torch.zeros(128, 200)
     _resave(ckpt_dir / WEIGHTS_FILE, tensors)
-    with pytest.raises(CheckpointError, match=r"'fuse.weight' has shape \(128, 200\)"):
+    with pytest.raises(PlannerCheckpointError, match=r"'fuse.weight' has shape \(128, 200\)"):
         load_checkpoint(ckpt_dir)
 
 
@@ -81,7 +81,7 @@ def test_tampered_tensor_values_fail_the_probe(ckpt_dir: Path) -> None:
     tensors = load_file(str(ckpt_dir / WEIGHTS_FILE))
     tensors["fuse.weight"] = tensors["fuse.weight"] * 1.5
     _resave(ckpt_dir / WEIGHTS_FILE, tensors)
-    with pytest.raises(CheckpointError, match="does not reproduce its recorded probe output"):
+    with pytest.raises(PlannerCheckpointError, match="does not reproduce its recorded probe output"):
         load_checkpoint(ckpt_dir)
 
 
@@ -90,7 +90,7 @@ def test_wrong_image_size_in_config_is_caught(ckpt_dir: Path) -> None:
     body["model"]["image_size"] = 96
     (ckpt_dir / CONFIG_FILE).write_text(json.dumps(body))
     with pytest.raises(
-        CheckpointError, match=r"trained at image_size=48 but .*config\.json says image_size=96"
+        PlannerCheckpointError, match=r"trained at image_size=48 but .*config\.json says image_size=96"
     ):
         load_checkpoint(ckpt_dir)
 
@@ -99,21 +99,21 @@ def test_config_that_implies_other_shapes_is_caught(ckpt_dir: Path) -> None:
     body = json.loads((ckpt_dir / CONFIG_FILE).read_text())
     body["model"]["coord_channels"] = False  # the stem would take 3 channels, the weights have 5
     (ckpt_dir / CONFIG_FILE).write_text(json.dumps(body))
-    with pytest.raises(CheckpointError, match=r"image_encoder\.stem\.0\.weight"):
+    with pytest.raises(PlannerCheckpointError, match=r"image_encoder\.stem\.0\.weight"):
         load_checkpoint(ckpt_dir)
 
 
 def test_bad_config_json_is_named(ckpt_dir: Path) -> None:
     (ckpt_dir / CONFIG_FILE).write_text("{not json")
-    with pytest.raises(CheckpointError, match=f"cannot parse .*{CONFIG_FILE}"):
+    with pytest.raises(PlannerCheckpointError, match=f"cannot parse .*{CONFIG_FILE}"):
         load_checkpoint(ckpt_dir)
     (ckpt_dir / CONFIG_FILE).write_text(json.dumps({"format": "something else"}))
-    with pytest.raises(CheckpointError, match="not a latent-planner checkpoint"):
+    with pytest.raises(PlannerCheckpointError, match="not a latent-planner checkpoint"):
         load_checkpoint(ckpt_dir)
 
 
 def test_vocabulary_mismatch_is_named(ckpt_dir: Path) -> None:
     with (ckpt_dir / VOCAB_FILE).open("a") as f:
         f.write("extratoken\n")
-    with pytest.raises(CheckpointError, match=f"{VOCAB_FILE} has .* tokens"):
+    with pytest.raises(PlannerCheckpointError, match=f"{VOCAB_FILE} has .* tokens"):
         load_checkpoint(ckpt_dir)

@@ -4,11 +4,11 @@ from pathlib import Path
 
 import pytest
 import torch
+from latent_synthetic import write_synthetic_dataset
 
 from controller.planning.latent.config import AugmentConfig, LossWeights, ModelConfig, TrainConfig
 from controller.planning.latent.data import load_images, load_index
 from controller.planning.latent.evaluate import evaluate_checkpoint
-from controller.planning.latent.synthetic import write_synthetic_dataset
 from controller.planning.latent.train import CURVES_FILE, METRICS_FILE, train
 
 

@@ -6,7 +6,8 @@ import json
 from pathlib import Path
 
 import pytest
-from mission_fakes import FakeCamera, FakeDetector, FakePlanner, FakeVehicle
+from fake_vehicle import FakeVehicle
+from mission_fakes import FakeCamera, FakeDetector, FakePlanner
 
 from controller.missions.kits.base import FlightKit
 from controller.missions.runner import fly_kit
@@ -40,7 +41,7 @@ def read_report(out: Path) -> dict:
 
 
 def test_a_centred_mission_passes_lands_and_writes_every_file(tmp_path: Path) -> None:
-    vehicle = FakeVehicle(east_m=-0.8, up_m=0.4)
+    vehicle = FakeVehicle.at_pose(east_m=-0.8, up_m=0.4)
     mission = parse_mission({"name": "fake-ok", "planner": "classic", "expect": {"max_steps": 12}})
     result = fly_kit(kit_for(vehicle, ClassicPlanner()), mission, tmp_path, LIMITS)
     assert result.passed, result.failures
@@ -57,7 +58,7 @@ def test_a_centred_mission_passes_lands_and_writes_every_file(tmp_path: Path) ->
 
 
 def test_target_lost_ends_holding_then_landing_and_fails_the_mission(tmp_path: Path) -> None:
-    vehicle = FakeVehicle(east_m=-0.5)
+    vehicle = FakeVehicle.at_pose(east_m=-0.5)
     detector = FakeDetector(vehicle, misses=range(1, 100))
     mission = parse_mission({"name": "fake-lost", "planner": "classic", "loop": {"lost_recoveries": 0}})
     result = fly_kit(kit_for(vehicle, FakePlanner([RIGHT]), detector), mission, tmp_path, LIMITS)
@@ -70,7 +71,7 @@ def test_target_lost_ends_holding_then_landing_and_fails_the_mission(tmp_path: P
 
 
 def test_expected_target_lost_passes(tmp_path: Path) -> None:
-    vehicle = FakeVehicle(east_m=-0.5)
+    vehicle = FakeVehicle.at_pose(east_m=-0.5)
     detector = FakeDetector(vehicle, misses=range(100))  # never seen
     mission = parse_mission({"name": "fake-unseen", "expect": {"outcome": "target_lost"}})
     result = fly_kit(kit_for(vehicle, FakePlanner([RIGHT]), detector), mission, tmp_path, LIMITS)
@@ -79,7 +80,7 @@ def test_expected_target_lost_passes(tmp_path: Path) -> None:
 
 
 def test_report_survives_an_error_mid_flight(tmp_path: Path) -> None:
-    vehicle = FakeVehicle(east_m=-1.0, fail_on_move=3)
+    vehicle = FakeVehicle.at_pose(east_m=-1.0, fail_on_move=3)
     mission = parse_mission({"name": "fake-crash", "planner": "classic", "loop": {"scale_moves": False}})
     result = fly_kit(kit_for(vehicle, FakePlanner([RIGHT])), mission, tmp_path, LIMITS)
     assert result.outcome == "aborted" and not result.passed
@@ -103,7 +104,7 @@ class InterruptingCamera(FakeCamera):
 
 
 def test_ctrl_c_lands_and_keeps_the_steps(tmp_path: Path) -> None:
-    vehicle = FakeVehicle(east_m=-1.0)
+    vehicle = FakeVehicle.at_pose(east_m=-1.0)
     mission = parse_mission({"name": "fake-ctrl-c"})
     kit = kit_for(vehicle, FakePlanner([RIGHT]), camera=InterruptingCamera(at_read=2))
     with pytest.raises(KeyboardInterrupt):
@@ -115,7 +116,7 @@ def test_ctrl_c_lands_and_keeps_the_steps(tmp_path: Path) -> None:
 
 
 def test_step_budget_expectation_is_judged(tmp_path: Path) -> None:
-    vehicle = FakeVehicle(east_m=-1.0)
+    vehicle = FakeVehicle.at_pose(east_m=-1.0)
     mission = parse_mission({"name": "fake-budget", "planner": "classic", "expect": {"max_steps": 1}})
     result = fly_kit(kit_for(vehicle, ClassicPlanner()), mission, tmp_path, LIMITS)
     assert result.outcome == "centred" and not result.passed
@@ -141,7 +142,7 @@ def test_default_mission_in_process_ends_centred_per_truth(
 def test_an_epsilon_inside_the_stopping_margin_is_refused_before_the_vehicle_is_touched(
     tmp_path: Path,
 ) -> None:
-    vehicle = FakeVehicle(east_m=-0.5)
+    vehicle = FakeVehicle.at_pose(east_m=-0.5)
     kit = kit_for(vehicle, ClassicPlanner())
     kit.epsilon_px = 2.0  # the default margin is 2 px at 224 px
     mission = parse_mission({"name": "tiny-eps", "planner": "classic", "epsilon_px": 2.0})
@@ -199,13 +200,13 @@ class FreezingCamera(FakeCamera):
 
 
 def test_a_frozen_camera_ends_the_mission_and_lands_but_a_short_freeze_passes(tmp_path: Path) -> None:
-    vehicle = FakeVehicle(east_m=-1.0)
+    vehicle = FakeVehicle.at_pose(east_m=-1.0)
     mission = parse_mission({"name": "frozen", "planner": "classic"})
     camera = FreezingCamera(at_read=0, frozen_reads=10_000)  # stuck from the start
     result = fly_kit(kit_for(vehicle, ClassicPlanner(), camera=camera), mission, tmp_path / "a", LIMITS)
     assert result.outcome == "aborted" and "frozen" in (result.error or "")
     assert "land" in vehicle.calls and not vehicle.in_air
-    vehicle = FakeVehicle(east_m=-1.0)
+    vehicle = FakeVehicle.at_pose(east_m=-1.0)
     camera = FreezingCamera(at_read=1, frozen_reads=3)  # a few stuck frames after the first move
     result = fly_kit(kit_for(vehicle, ClassicPlanner(), camera=camera), mission, tmp_path / "b", LIMITS)
     assert result.outcome == "centred", result.error

@@ -10,7 +10,7 @@ import pytest
 from controller.missions.results import judge
 from controller.missions.schema import MissionFileError, RandomStart, StartOffset, load_mission, parse_mission
 from controller.missions.suite import load_suite
-from controller.planning.loop import Outcome
+from controller.planning.loop_records import Outcome
 
 MISSIONS_DIR = Path(__file__).resolve().parents[1] / "missions" / "regression"
 

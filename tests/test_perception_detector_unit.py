@@ -12,7 +12,7 @@ import torch
 
 from perception.detector_data import make_targets
 from perception.detector_model import EDGE_SCALE_PX, CentreNet, DetectorConfig, fuse_for_inference
-from perception.errors import CheckpointError
+from perception.errors import DetectorCheckpointError
 from perception.image_detector import ImageDetector, load_model, normalise, save_checkpoint
 
 SMALL = DetectorConfig(input_size=64, widths=(4, 8, 8, 8, 8), neck_width=8)
@@ -84,24 +84,24 @@ def test_corrupt_checkpoints_name_the_file(tmp_path: Path) -> None:
     weights, config = tmp_path / "model.safetensors", tmp_path / "config.json"
     good = weights.read_bytes()
     weights.write_bytes(b"\x00garbage" * 10)
-    with pytest.raises(CheckpointError, match=r"model\.safetensors: corrupt"):
+    with pytest.raises(DetectorCheckpointError, match=r"model\.safetensors: corrupt"):
         load_model(tmp_path)
     weights.write_bytes(good[: len(good) // 2])
-    with pytest.raises(CheckpointError, match=r"model\.safetensors"):
+    with pytest.raises(DetectorCheckpointError, match=r"model\.safetensors"):
         load_model(tmp_path)
     weights.write_bytes(good)
     payload = json.loads(config.read_text())
     payload["detector"]["neck_width"] = 16  # no longer matches the weights
     config.write_text(json.dumps(payload))
-    with pytest.raises(CheckpointError, match=r"does not match config\.json"):
+    with pytest.raises(DetectorCheckpointError, match=r"does not match config\.json"):
         load_model(tmp_path)
     payload["detector"]["bogus"] = 1
     config.write_text(json.dumps(payload))
-    with pytest.raises(CheckpointError, match=r"config\.json: field 'detector': unknown field"):
+    with pytest.raises(DetectorCheckpointError, match=r"config\.json: field 'detector': unknown field"):
         load_model(tmp_path)
     config.write_text("{not json")
-    with pytest.raises(CheckpointError, match=r"config\.json: unreadable"):
+    with pytest.raises(DetectorCheckpointError, match=r"config\.json: unreadable"):
         load_model(tmp_path)
     config.unlink()
-    with pytest.raises(CheckpointError, match=r"config\.json: missing"):
+    with pytest.raises(DetectorCheckpointError, match=r"config\.json: missing"):
         load_model(tmp_path)

@@ -34,7 +34,7 @@ from sim_world.px4_bridge.px4_process import (
 )
 from sim_world.px4_bridge.run import Px4SimConfig, config_from_json, config_to_json
 from sim_world.px4_bridge.sensors import SensorNoise, SensorSuite, Truth
-from sim_world.vehicle.serve import StartOffset
+from sim_world.vehicle.serve import StartPose
 
 ZURICH = HomePoint()
 
@@ -226,7 +226,7 @@ def test_simulator_config_survives_json(tmp_path: Path) -> None:
         px4_dir=tmp_path,
         instance=2,
         seed=5,
-        start_offset=StartOffset(0.1, -0.2, 2.0, 3.0),
+        start_offset=StartPose(0.1, -0.2, 2.0, 3.0),
         system_id=99,
         params={"COM_DISARM_LAND": 1.0},
         wind=WindConfig(mean_enu_m_s=(0.5, 0.0, 0.0), gust_std_m_s=0.3),

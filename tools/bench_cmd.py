@@ -1,9 +1,10 @@
 """`dronectl bench sim|perception|flight|px4 [options]`: the speed benchmarks.
 
-Each benchmark lives with the code it measures, in a module exposing
-`bench_main(argv: list[str]) -> int`; this command only picks the module (imported
-lazily, so one benchmark never pays for another's imports) and hands it the rest
-of the command line. `dronectl bench <name> --help` shows a benchmark's options.
+Each benchmark's measuring code lives with the code it measures (`sim_world.bench`,
+`flight.bench`, `flight.bench_px4`, `perception.bench`); its command line is a
+`tools/bench_<name>.py` with `main(argv) -> int`. This command only picks the module
+(imported lazily, so one benchmark never pays for another's imports) and hands it the
+rest of the command line. `dronectl bench <name> --help` shows a benchmark's options.
 """
 
 from __future__ import annotations
@@ -12,10 +13,10 @@ import importlib
 import sys
 
 BENCHMARKS: dict[str, tuple[str, str]] = {
-    "sim": ("sim_world.bench", "physics and camera real-time factors, render times, collection throughput"),
-    "perception": ("perception.bench", "detector latency, stream-camera latency, detector accuracy"),
-    "flight": ("flight.bench", "vehicle command and telemetry latency"),
-    "px4": ("flight.bench_px4", "real PX4 SITL in lockstep: readiness, hover drift, lockstep speed"),
+    "sim": ("tools.bench_sim", "physics and camera real-time factors, render times, collection throughput"),
+    "perception": ("tools.bench_perception", "detector latency, stream-camera latency, detector accuracy"),
+    "flight": ("tools.bench_flight", "vehicle command and telemetry latency"),
+    "px4": ("tools.bench_px4", "real PX4 SITL in lockstep: readiness, hover drift, lockstep speed"),
 }
 
 
@@ -34,4 +35,4 @@ def main(argv: list[str]) -> int:
         print(f"dronectl bench: unknown benchmark {name!r}\n\n{_usage()}", file=sys.stderr)
         return 2
     module = importlib.import_module(BENCHMARKS[name][0])
-    return int(module.bench_main(rest) or 0)
+    return int(module.main(rest) or 0)

@@ -20,7 +20,7 @@ from sim_world.px4_bridge.run import Px4SimConfig, serve
 from sim_world.px4_bridge.sensors import SensorNoise
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
 from sim_world.vehicle.params import ParamError, parse_param_overrides
-from sim_world.vehicle.serve import StartOffset
+from sim_world.vehicle.serve import StartPose
 
 
 def parse_speed(text: str) -> float | None:
@@ -113,7 +113,7 @@ def main(argv: list[str]) -> int:
             instance=args.instance,
             scene=DEFAULT_SCENE if args.scene is None else load_scene_config(args.scene),
             seed=args.seed,
-            start_offset=StartOffset.parse(args.start_offset) if args.start_offset else None,
+            start_offset=StartPose.parse(args.start_offset) if args.start_offset else None,
             image_size_px=args.size,
             camera=not args.no_camera,
             video_port=args.video_port,

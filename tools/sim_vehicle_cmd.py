@@ -14,7 +14,7 @@ from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_c
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.params import ParamError, parse_param_overrides
-from sim_world.vehicle.serve import SimVehicleRun, StartOffset, serve
+from sim_world.vehicle.serve import SimVehicleRun, StartPose, serve
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -76,7 +76,7 @@ def main(argv: list[str]) -> int:
             vehicle=vehicle,
             scene=DEFAULT_SCENE if args.scene is None else load_scene_config(args.scene),
             seed=args.seed,
-            start_offset=StartOffset.parse(args.start_offset) if args.start_offset else None,
+            start_offset=StartPose.parse(args.start_offset) if args.start_offset else None,
             image_size_px=args.size,
             duration_s=args.duration,
             status_every_s=args.status_every,

@@ -27,7 +27,7 @@ from typing import Any
 from matplotlib.figure import Figure  # the object API: no pyplot state, no GUI backend
 from PIL import Image
 
-from controller.planning.loop import StepRecord
+from controller.planning.loop_records import StepRecord
 from perception.annotate import annotate
 
 log = logging.getLogger(__name__)

@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from controller.missions.schema import Mission
-from controller.planning.loop import Outcome, StepRecord
+from controller.planning.loop_records import Outcome, StepRecord
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,8 @@ from controller.missions.kits.base import FlightKit, LoadedModels
 from controller.missions.report import REPORT_JSON, ReportWriter, claim_report_dir, write_setup_failure
 from controller.missions.results import MissionResult, count_steps, judge
 from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission
-from controller.planning.loop import CentringConfig, CentringLoop, Outcome, count_refinements
+from controller.planning.loop import CentringLoop
+from controller.planning.loop_records import CentringConfig, Outcome, count_refinements
 from core.centring import default_epsilon_px
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, flight_guard

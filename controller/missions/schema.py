@@ -43,8 +43,6 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import (
-    BaseModel,
-    ConfigDict,
     Discriminator,
     Field,
     Tag,
@@ -52,7 +50,7 @@ from pydantic import (
     model_validator,
 )
 
-from core.config_files import ConfigFileError, Range, read_yaml, validate_mapping
+from core.config_files import ConfigFileError, Range, StrictModel, read_yaml, validate_mapping
 from flight.errors import ConnectionUrlError
 from flight.urls import validate_connection_url
 
@@ -74,18 +72,14 @@ class MissionFileError(ConfigFileError):
     """A mission file that cannot be flown; the message names the file and the field."""
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class SceneSpec(_Strict):
+class SceneSpec(StrictModel):
     """Which scene: a scene config (a YAML path, an inline mapping, or null for the default) and a seed."""
 
     config: str | dict[str, Any] | None = None
     seed: int = Field(default=0, ge=0)
 
 
-class StartOffset(_Strict):
+class StartOffset(StrictModel):
     """A fixed start: the drone's offset from the centred pose, in metres and degrees."""
 
     right_m: float = Field(default=0.0, ge=-3.0, le=3.0)
@@ -94,7 +88,7 @@ class StartOffset(_Strict):
     yaw_deg: float = Field(default=0.0, ge=-30.0, le=30.0)
 
 
-class RandomStart(_Strict):
+class RandomStart(StrictModel):
     """A seeded random start: the target's image position as a fraction of the half view, any direction."""
 
     seed: int = Field(ge=0)
@@ -138,7 +132,7 @@ class RandomStart(_Strict):
         return StartOffset(right_m=right_m, up_m=up_m, distance_m=distance, yaw_deg=yaw)
 
 
-class RandomStartSpec(_Strict):
+class RandomStartSpec(StrictModel):
     random: RandomStart
 
 
@@ -154,7 +148,7 @@ Start = Annotated[
 """Either a fixed offset or `{random: {...}}`; errors are reported for the form that was written."""
 
 
-class WindSpec(_Strict):
+class WindSpec(StrictModel):
     """Wind for the simulated world (ENU m/s); ignored, with a warning, for a real vehicle."""
 
     mean_enu_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -162,7 +156,7 @@ class WindSpec(_Strict):
     gust_time_constant_s: float = Field(default=2.0, gt=0.0)
 
 
-class LoopOverrides(_Strict):
+class LoopOverrides(StrictModel):
     """Overrides of `controller.planning.loop.CentringConfig` (unset fields keep its defaults)."""
 
     move_m: float | None = Field(default=None, gt=0.0, le=2.0)
@@ -183,7 +177,7 @@ class LoopOverrides(_Strict):
         return {k: v for k, v in self.model_dump().items() if v is not None}
 
 
-class Expectations(_Strict):
+class Expectations(StrictModel):
     """What must hold when the loop ends; an unset limit is not checked.
 
     With `outcome: centred` (the default) the target must also end within ε of the
@@ -196,14 +190,14 @@ class Expectations(_Strict):
     """The final truth offset, max(|du|, |dv|), must not exceed this."""
 
 
-class PortSpec(_Strict):
+class PortSpec(StrictModel):
     """Ports for a `sim-mavlink` mission (the suite assigns distinct ones to parallel missions)."""
 
     mavlink_udp: int = Field(default=14840, ge=1024, le=65535)
     http: int = Field(default=18840, ge=1024, le=65535)
 
 
-class Px4Spec(_Strict):
+class Px4Spec(StrictModel):
     """How a `px4-sitl` mission runs PX4 SITL (see `sim_world.px4_bridge`)."""
 
     dir: str | None = None
@@ -234,7 +228,7 @@ class Px4Spec(_Strict):
         return value
 
 
-class LinkFaultSpec(_Strict):
+class LinkFaultSpec(StrictModel):
     """A bad MAVLink link between the controller and the vehicle (see `flight.link_faults`)."""
 
     loss: float = Field(default=0.0, ge=0.0, lt=1.0)
@@ -244,7 +238,7 @@ class LinkFaultSpec(_Strict):
     reorder: float = Field(default=0.0, ge=0.0, lt=1.0)
 
 
-class CameraFaultSpec(_Strict):
+class CameraFaultSpec(StrictModel):
     """A bad camera at its source (`sim_world.rendering.video.VideoFaults`); times: simulated s from boot."""
 
     drop: float = Field(default=0.0, ge=0.0, lt=1.0)
@@ -253,7 +247,7 @@ class CameraFaultSpec(_Strict):
     dies_at_s: float | None = Field(default=None, ge=0.0)
 
 
-class FaultSpec(_Strict):
+class FaultSpec(StrictModel):
     """Faults injected on purpose, to see how a mission degrades; all off by default."""
 
     link: LinkFaultSpec | None = None
@@ -269,7 +263,7 @@ class FaultSpec(_Strict):
         return bool(self.link or self.camera or self.gust_m_s or self.vehicle_dies_at_s is not None)
 
 
-class Mission(_Strict):
+class Mission(StrictModel):
     """One centring mission."""
 
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")

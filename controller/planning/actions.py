@@ -13,6 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
+from core.centring import axis_signs
+
 
 class XMove(IntEnum):
     LEFT = 0
@@ -62,8 +64,5 @@ ALL_ACTIONS: tuple[Action, ...] = tuple(Action.from_index(i) for i in range(NUM_
 
 def label_from_offset(du_px: float, dv_px: float, epsilon_px: float) -> Action:
     """The correct action for a target at offset (du, dv) from the image centre."""
-    if epsilon_px < 0:
-        raise ValueError(f"epsilon_px must be >= 0, got {epsilon_px}")
-    x = XMove.RIGHT if du_px > epsilon_px else XMove.LEFT if du_px < -epsilon_px else XMove.NONE
-    z = ZMove.UP if dv_px < -epsilon_px else ZMove.DOWN if dv_px > epsilon_px else ZMove.NONE
-    return Action(x, z)
+    sx, sz = axis_signs(du_px, dv_px, epsilon_px)  # the ε rule (core.centring), written once
+    return Action(XMove(sx + 1), ZMove(1 - sz))

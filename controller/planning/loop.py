@@ -65,197 +65,29 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from enum import Enum
 
 import numpy as np
 
 from controller.planning.actions import Action, XMove, ZMove
+from controller.planning.loop_records import (
+    CentringConfig,
+    CentringResult,
+    MoveSchedule,
+    Outcome,
+    StepRecord,
+    StepTiming,
+    TruthProbe,
+)
 from controller.planning.planners import Observation, Planner
-from core.centring import REFERENCE_WIDTH_PX, is_centred, offset_px
+from core.centring import default_stop_margin_px, is_centred, offset_px
 from flight.moves import MoveResult, execute_move
-from flight.types import Telemetry, VelocityBody
+from flight.types import VelocityBody
 from flight.vehicle import Vehicle
 from perception.camera import Camera
 from perception.detector import Detector
 from perception.errors import CameraFrozenError
-from perception.types import Detection, Frame
 
 log = logging.getLogger(__name__)
-
-DEFAULT_STOP_MARGIN_PX_AT_224 = 2.0
-"""The default stopping margin at 224 px width: about the detector's p95 centre error (1.7 px)."""
-
-
-def default_stop_margin_px(width: int) -> float:
-    """The default stopping margin for an image `width` pixels wide (scaled linearly, like ε)."""
-    if width <= 0:
-        raise ValueError(f"image width must be > 0, got {width}")
-    return DEFAULT_STOP_MARGIN_PX_AT_224 * width / REFERENCE_WIDTH_PX
-
-
-TruthProbe = Callable[[], "tuple[float, float] | None"]
-"""Judging only: the true (du, dv) of the target centre in pixels now, None when out of view."""
-
-
-class Outcome(str, Enum):
-    """How a centring run ended."""
-
-    CENTRED = "centred"
-    MAX_STEPS = "max_steps"
-    TIMEOUT = "timeout"
-    TARGET_LOST = "target_lost"
-    PLANNER_STALLED = "planner_stalled"
-    ABORTED = "aborted"  # an exception or Ctrl-C ended the flight (set by the caller)
-
-
-@dataclass(frozen=True)
-class CentringConfig:
-    """Everything the loop needs to know besides its components. Lengths in metres, times in seconds."""
-
-    epsilon_px: float
-    instruction: str = "center the gauge"
-    max_steps: int = 20
-    timeout_s: float = 120.0
-    move_m: float = 0.3
-    min_move_m: float = 0.05
-    shrink: float = 0.5
-    speed_m_s: float = 0.5
-    settle_s: float = 0.3
-    settle_speed_m_s: float = 0.08
-    settle_timeout_s: float = 4.0
-    frame_timeout_s: float = 5.0
-    max_stalls: int = 3
-    lost_rereads: int = 2
-    lost_recoveries: int = 1
-    stop_margin_px: float | None = None
-    """Stop when the detector's offset is within ε − this on both axes; None: `default_stop_margin_px(W)`."""
-    max_refinements: int = 4
-    """Boundary refinement moves allowed per run (0: none; see the module docstring)."""
-    scale_moves: bool = True
-    """Scale each move with the detector's pixel offset (True) or the paper's fixed lengths (False)."""
-    max_move_m: float = 1.0
-    """Scaled scheme: the longest move on an axis (the cap, which shrinks on reversals)."""
-    move_gain: float = 0.8
-    assumed_distance_m: float = 2.0
-    """Scaled scheme: the distance to the wall assumed to turn pixels into metres (not measured)."""
-    hfov_deg: float = 60.0
-    """Scaled scheme: the camera's horizontal field of view (the sim camera's; a real one's calibration)."""
-
-    def __post_init__(self) -> None:
-        if not self.epsilon_px > 0:
-            raise ValueError(f"epsilon_px must be > 0, got {self.epsilon_px}")
-        if not (0 < self.min_move_m <= self.move_m):
-            raise ValueError(f"need 0 < min_move_m <= move_m, got {self.min_move_m} and {self.move_m}")
-        if not self.min_move_m <= self.max_move_m:
-            raise ValueError(f"need min_move_m <= max_move_m, got {self.min_move_m} and {self.max_move_m}")
-        if self.stop_margin_px is not None and not 0 <= self.stop_margin_px < self.epsilon_px:
-            raise ValueError(
-                f"stop_margin_px must be in [0, epsilon_px={self.epsilon_px:g}), got {self.stop_margin_px}"
-            )
-        if self.max_refinements < 0:
-            raise ValueError(f"max_refinements must be >= 0, got {self.max_refinements}")
-        if not 0 < self.move_gain <= 2 or not 0 < self.hfov_deg < 180 or not self.assumed_distance_m > 0:
-            raise ValueError("need 0 < move_gain <= 2, 0 < hfov_deg < 180 and assumed_distance_m > 0")
-        if not 0 < self.shrink <= 1:
-            raise ValueError(f"shrink must be in (0, 1], got {self.shrink}")
-        if self.max_steps < 1 or self.max_stalls < 1 or self.lost_rereads < 0 or self.lost_recoveries < 0:
-            raise ValueError("max_steps and max_stalls must be >= 1, lost_rereads and lost_recoveries >= 0")
-        for name in ("timeout_s", "speed_m_s", "settle_speed_m_s", "settle_timeout_s", "frame_timeout_s"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        if self.settle_s < 0:
-            raise ValueError(f"settle_s must be >= 0, got {self.settle_s}")
-
-
-class MoveSchedule:
-    """Per-axis move lengths (or caps) that shrink when the direction on that axis reverses."""
-
-    def __init__(self, move_m: float, min_move_m: float, shrink: float) -> None:
-        self.min_move_m = min_move_m
-        self.shrink = shrink
-        self.length_m = [move_m, move_m]  # [right/left, up/down]
-        self._last_sign = [0, 0]
-
-    def lengths_for(self, action: Action, wanted_m: tuple[float, float] | None = None) -> tuple[float, float]:
-        """(right_m, up_m) signed lengths of the move for `action`, updating the schedule.
-
-        `wanted_m` (scaled scheme): per axis, the unsigned length asked for, clamped to
-        [min_move_m, the axis's current length]. None (fixed scheme): the axis's current length.
-        """
-        signs = action.direction()
-        out = [0.0, 0.0]
-        for axis, sign in enumerate(signs):
-            if sign == 0:
-                continue
-            if self._last_sign[axis] == -sign:
-                self.shrink_axis(axis)
-            self._last_sign[axis] = sign
-            length = self.length_m[axis]
-            if wanted_m is not None:
-                length = min(length, max(self.min_move_m, wanted_m[axis]))
-            out[axis] = sign * length
-        return out[0], out[1]
-
-    def shrink_axis(self, axis: int) -> None:
-        self.length_m[axis] = max(self.min_move_m, self.length_m[axis] * self.shrink)
-
-
-@dataclass(frozen=True)
-class StepTiming:
-    """Wall-clock seconds spent in each part of a step; `overhead_s` is everything but the move."""
-
-    read_s: float
-    detect_s: float
-    plan_s: float
-    move_s: float
-    total_s: float
-
-    @property
-    def overhead_s(self) -> float:
-        return self.total_s - self.move_s
-
-
-@dataclass
-class StepRecord:
-    """One step of the loop: what was seen, what was decided, what was flown."""
-
-    index: int
-    frame: Frame
-    detection: Detection | None
-    offset_px: tuple[float, float] | None
-    truth_offset_px: tuple[float, float] | None
-    centred: bool
-    telemetry: Telemetry
-    vehicle_time_s: float
-    action: Action | None = None
-    distances: tuple[float, ...] | None = None
-    move_m: tuple[float, float] | None = None  # commanded (right_m, up_m)
-    move: MoveResult | None = None
-    event: str = ""  # "", "centred", "lost", "recovery", "refinement", "stall", "max_steps", "timeout"
-    stop_threshold_px: float | None = None  # ε − the stopping margin: what `centred` was tested against
-    timing: StepTiming = field(default_factory=lambda: StepTiming(0.0, 0.0, 0.0, 0.0, 0.0))
-
-
-@dataclass
-class CentringResult:
-    outcome: Outcome
-    steps: list[StepRecord]
-    message: str = ""
-
-    @property
-    def moves(self) -> int:
-        """How many moves were flown (planner, refinement and recovery moves)."""
-        return sum(1 for s in self.steps if s.move is not None)
-
-    @property
-    def refinement_moves(self) -> int:
-        """Boundary refinement moves: flown by the loop after the planner chose "no move"."""
-        return count_refinements(self.steps)
-
-
-def count_refinements(steps: list[StepRecord]) -> int:
-    """How many boundary refinement moves `steps` contain."""
-    return sum(1 for s in steps if s.event == "refinement")
 
 
 @dataclass

@@ -34,8 +34,8 @@ from core.dataset import (
 from core.frames import enu_to_ned, yaw_enu_to_ned_rad
 from sim_world.collection.plan import (
     CollectConfig,
+    CollectionPlan,
     ImageSpec,
-    Plan,
     View,
     drone_pose_for_view,
     plan_collection,
@@ -169,7 +169,9 @@ def render_scenes(job: tuple[CollectConfig, tuple[tuple[ImageSpec, ...], ...]]) 
     return rows
 
 
-def _metadata(cfg: CollectConfig, plan: Plan, counts: dict[str, int], complete: bool) -> dict[str, Any]:
+def _metadata(
+    cfg: CollectConfig, plan: CollectionPlan, counts: dict[str, int], complete: bool
+) -> dict[str, Any]:
     k = ForwardCamera(cfg.camera).intrinsics
     planned: dict[str, int] = {}
     for spec in plan.images:

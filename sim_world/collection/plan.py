@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from core.centring import axis_signs, default_epsilon_px
 from sim_world.physics.quadrotor import RigidBodyState
 from sim_world.rendering.camera import CameraConfig, ForwardCamera, Intrinsics
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfig
@@ -39,19 +40,11 @@ SECTOR_DIRECTIONS: dict[str, tuple[int, int]] = {
 }
 """(sx, sz): sx = +1 target right of centre (du > ε), sz = +1 target above centre (dv < −ε)."""
 SECTORS = tuple(SECTOR_DIRECTIONS)
-REFERENCE_EPSILON_PX = 10.0
-"""ε at 224 px width, scaled linearly with the width (the project's default ε rule)."""
-
-
-def default_epsilon_px(width: int) -> float:
-    """The project's default ε for an image `width` pixels wide (10 px at 224)."""
-    return REFERENCE_EPSILON_PX * width / 224.0
 
 
 def sector_of_offset(du_px: float, dv_px: float, epsilon_px: float) -> str:
     """The sector of an offset under the ε bands ('centre' when within ε on both axes)."""
-    sx = 1 if du_px > epsilon_px else -1 if du_px < -epsilon_px else 0
-    sz = 1 if dv_px < -epsilon_px else -1 if dv_px > epsilon_px else 0
+    sx, sz = axis_signs(du_px, dv_px, epsilon_px)  # the ε rule (core.centring), written once
     if sx == 0 and sz == 0:
         return "centre"
     return next(name for name, d in SECTOR_DIRECTIONS.items() if d == (sx, sz))
@@ -129,7 +122,7 @@ class ImageSpec:
 
 
 @dataclass(frozen=True)
-class Plan:
+class CollectionPlan:
     images: tuple[ImageSpec, ...]
     train_scene_seeds: tuple[int, ...]
     test_scene_seeds: tuple[int, ...]
@@ -142,7 +135,7 @@ class Plan:
         return [tuple(g) for g in groups.values()]
 
 
-def plan_collection(cfg: CollectConfig) -> Plan:
+def plan_collection(cfg: CollectConfig) -> CollectionPlan:
     """Every image's split, sector and scene; training and test scene seeds are disjoint."""
     rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0xC011EC7]))
     n_train_images = cfg.n_goal + len(SECTORS) * cfg.n_per_sector
@@ -173,7 +166,7 @@ def plan_collection(cfg: CollectConfig) -> Plan:
             image_id = f"{split}_{counters[split]:06d}"
             counters[split] += 1
             images.append(ImageSpec(len(images), image_id, split, sector, scene_of[k]))
-    return Plan(tuple(images), train_seeds, test_seeds)
+    return CollectionPlan(tuple(images), train_seeds, test_seeds)
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,7 @@ from sim_world.px4_bridge.sensors import SensorNoise, SensorSuite
 from sim_world.rendering.camera import CameraConfig
 from sim_world.rendering.video import VideoConfig, VideoError, VideoFaults, WorldVideoFeed
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfig, parse_scene_config
-from sim_world.vehicle.serve import StartOffset
+from sim_world.vehicle.serve import StartPose
 from sim_world.world import World, WorldConfig, derived_seed
 
 log = logging.getLogger(__name__)
@@ -58,7 +58,7 @@ class Px4SimConfig:
     instance: int = 0
     scene: SceneConfig = DEFAULT_SCENE
     seed: int = 0
-    start_offset: StartOffset | None = None
+    start_offset: StartPose | None = None
     image_size_px: int = 224
     camera: bool = True
     video_port: int | None = None  # None: 8080 + instance
@@ -267,7 +267,7 @@ def config_from_json(data: dict[str, Any]) -> Px4SimConfig:
         instance=int(data["instance"]),
         scene=parse_scene_config(data["scene"], "<px4-sim config>"),
         seed=int(data["seed"]),
-        start_offset=None if data["start_offset"] is None else StartOffset(**data["start_offset"]),
+        start_offset=None if data["start_offset"] is None else StartPose(**data["start_offset"]),
         image_size_px=int(data["image_size_px"]),
         camera=bool(data["camera"]),
         video_port=data["video_port"],

@@ -13,9 +13,9 @@ import re
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
+from pydantic import AfterValidator, Field, field_validator
 
-from core.config_files import ConfigFileError, check_range, read_yaml, validate_mapping
+from core.config_files import ConfigFileError, StrictModel, check_range, read_yaml, validate_mapping
 
 TargetKind = Literal["gauge", "valve", "switchbox"]
 WallTexture = Literal["concrete", "brick", "painted_metal"]
@@ -57,13 +57,7 @@ def hex_to_rgb(colour: str) -> tuple[int, int, int]:
     return int(colour[1:3], 16), int(colour[3:5], 16), int(colour[5:7], 16)
 
 
-class _Strict(BaseModel):
-    """Frozen, and unknown keys are errors (a misspelt key must not be silently ignored)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class TargetConfig(_Strict):
+class TargetConfig(StrictModel):
     """The inspection target: which kind, how big, where on the wall, in which colours."""
 
     kinds: tuple[TargetKind, ...] = Field(default=TARGET_KINDS, min_length=1)
@@ -105,7 +99,7 @@ class TargetConfig(_Strict):
         return _within(value, 0.0, 1.0)
 
 
-class WallConfig(_Strict):
+class WallConfig(StrictModel):
     """The wall the target is mounted on: the plane north = `north_m`, facing south."""
 
     north_m: float = Field(default=3.0, gt=0.5)
@@ -117,14 +111,14 @@ class WallConfig(_Strict):
     )
 
 
-class FloorConfig(_Strict):
+class FloorConfig(StrictModel):
     """The floor (z = 0), which the drone takes off from and lands on."""
 
     textures: tuple[FloorTexture, ...] = Field(default=("concrete", "tiles", "grating"), min_length=1)
     colours: tuple[Colour, ...] = Field(default=("#6e6e6a", "#8a8478", "#55585c"), min_length=1)
 
 
-class ClutterConfig(_Strict):
+class ClutterConfig(StrictModel):
     """Pipes, conduits, junction boxes, brackets and signs, and look-alike distractors."""
 
     density: Range = (0.3, 0.8)
@@ -146,7 +140,7 @@ class ClutterConfig(_Strict):
         return _within(value, 0, 10)
 
 
-class LightingConfig(_Strict):
+class LightingConfig(StrictModel):
     """TinyRenderer's single light: direction, colour and the Phong coefficients."""
 
     azimuth_deg: Range = (135.0, 225.0)
@@ -171,7 +165,7 @@ class LightingConfig(_Strict):
         return _within(value, 0.0, 90.0)
 
 
-class SceneConfig(_Strict):
+class SceneConfig(StrictModel):
     """Everything `Scene.build` randomises, as ranges; a seed picks one scene."""
 
     target: TargetConfig = TargetConfig()

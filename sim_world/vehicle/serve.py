@@ -36,7 +36,7 @@ _TAKEOFF_SPEC = next(s for s in PX4_PARAMS if s.name == "MIS_TAKEOFF_ALT")
 
 
 @dataclass(frozen=True)
-class StartOffset:
+class StartPose:
     """Where the drone starts, relative to the centred pose in front of the target."""
 
     right_m: float = 0.0
@@ -45,7 +45,7 @@ class StartOffset:
     yaw_deg: float = 0.0
 
     @classmethod
-    def parse(cls, text: str) -> StartOffset:
+    def parse(cls, text: str) -> StartPose:
         """From "right,up,distance,yaw" (metres, metres, metres, degrees)."""
         parts = text.split(",")
         try:
@@ -67,7 +67,7 @@ class SimVehicleRun:
     vehicle: SimVehicleConfig = field(default_factory=SimVehicleConfig)
     scene: SceneConfig = DEFAULT_SCENE
     seed: int = 0
-    start_offset: StartOffset | None = None
+    start_offset: StartPose | None = None
     image_size_px: int = 224
     duration_s: float | None = None  # None: until stopped
     status_every_s: float = 0.0  # log the loop statistics this often (0: never)
@@ -233,7 +233,7 @@ def run_from_json(data: dict[str, Any]) -> SimVehicleRun:
         vehicle=SimVehicleConfig(commander=commander, **v),
         scene=parse_scene_config(data["scene"], "<sim-vehicle config>"),
         seed=int(data["seed"]),
-        start_offset=None if data["start_offset"] is None else StartOffset(**data["start_offset"]),
+        start_offset=None if data["start_offset"] is None else StartPose(**data["start_offset"]),
         image_size_px=int(data["image_size_px"]),
         duration_s=data["duration_s"],
         status_every_s=float(data["status_every_s"]),

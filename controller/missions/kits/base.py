@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from controller.missions.schema import Mission
-from controller.planning.loop import TruthProbe
+from controller.planning.loop_records import TruthProbe
 from controller.planning.planners import Planner, make_planner
 from flight.link_faults import LinkFaults
 from flight.vehicle import Vehicle

@@ -39,7 +39,7 @@ from sim_world.px4_bridge.bridge import PX4_CLOCK_OFFSET_US, BridgeTiming
 from sim_world.px4_bridge.px4_process import find_px4_dir, px4_instance
 from sim_world.px4_bridge.run import OFFBOARD_PORT_BASE, READY_PREFIX, Px4SimConfig, config_to_json
 from sim_world.px4_bridge.sensors import SensorNoise
-from sim_world.vehicle.serve import StartOffset as SimStartOffset
+from sim_world.vehicle.serve import StartPose
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +64,7 @@ def px4_sim_config(mission: Mission, instance: int, out_dir: Path, system_id: in
         instance=instance,
         scene=scene_config_for(mission),
         seed=mission.scene.seed,
-        start_offset=SimStartOffset(start.right_m, start.up_m, start.distance_m, start.yaw_deg),
+        start_offset=StartPose(start.right_m, start.up_m, start.distance_m, start.yaw_deg),
         image_size_px=SIM_IMAGE_PX,
         video_port=VIDEO_PORT_BASE + instance,
         timing=BridgeTiming(speed=None if spec.speed == "max" else float(spec.speed)),

@@ -31,8 +31,7 @@ from flight.sim_launcher import SimulatorProcess
 from perception.stream_camera import StreamCamera
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.serve import READY_PREFIX as SIM_READY_PREFIX
-from sim_world.vehicle.serve import SimVehicleRun, run_to_json
-from sim_world.vehicle.serve import StartOffset as SimStartOffset
+from sim_world.vehicle.serve import SimVehicleRun, StartPose, run_to_json
 
 READY_TIMEOUT_S = 60.0
 
@@ -47,7 +46,7 @@ def sim_vehicle_run(mission: Mission, start: StartOffset, system_id: int) -> Sim
         video_port=mission.ports.http,
         video_fps=15.0,
     )
-    offset = SimStartOffset(start.right_m, start.up_m, start.distance_m, start.yaw_deg)
+    offset = StartPose(start.right_m, start.up_m, start.distance_m, start.yaw_deg)
     return SimVehicleRun(
         vehicle=vehicle,
         scene=scene_config_for(mission),

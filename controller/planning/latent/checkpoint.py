@@ -7,7 +7,7 @@ code (JSON + safetensors only) and checks, in order: files present, config valid
 tensor names and shapes as the config implies, the image size recorded in the
 safetensors metadata against the config's, vocabulary size, and that the weights
 reproduce the probe output. Every failure is
-a `CheckpointError` naming the file.
+a `PlannerCheckpointError` naming the file.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from safetensors import SafetensorError, safe_open
 from safetensors.torch import load_file, save_file
 
 from controller.planning.latent.config import GOAL_PROTOTYPE_RULE, ModelConfig
-from controller.planning.latent.errors import CheckpointError
+from controller.planning.latent.errors import PlannerCheckpointError
 from controller.planning.latent.model import LatentDynamicsModel
 from controller.planning.latent.tokenizer import VOCAB_FILE, InstructionTokenizer
 
@@ -86,14 +86,14 @@ def load_checkpoint(folder: Path) -> LoadedCheckpoint:
     """Load and verify a checkpoint folder (see the module docstring for the checks)."""
     folder = Path(folder)
     if not folder.is_dir():
-        raise CheckpointError(f"checkpoint folder not found: {folder}")
+        raise PlannerCheckpointError(f"checkpoint folder not found: {folder}")
     for name in (CONFIG_FILE, WEIGHTS_FILE, VOCAB_FILE):
         if not (folder / name).is_file():
-            raise CheckpointError(f"checkpoint file missing: {folder / name}")
+            raise PlannerCheckpointError(f"checkpoint file missing: {folder / name}")
     config, meta = _read_config(folder / CONFIG_FILE)
     tokenizer = InstructionTokenizer.load(folder, config.max_tokens)
     if tokenizer.vocab_size != config.vocab_size:
-        raise CheckpointError(
+        raise PlannerCheckpointError(
             f"{folder / VOCAB_FILE} has {tokenizer.vocab_size} tokens but {folder / CONFIG_FILE} "
             f"says vocab_size={config.vocab_size}"
         )
@@ -103,11 +103,11 @@ def load_checkpoint(folder: Path) -> LoadedCheckpoint:
             stored_size = (f.metadata() or {}).get("image_size")
         tensors = load_file(str(weights_path))
     except (SafetensorError, OSError, ValueError) as exc:
-        raise CheckpointError(
+        raise PlannerCheckpointError(
             f"cannot read {weights_path}: corrupt or not a safetensors file ({exc})"
         ) from exc
     if stored_size != str(config.image_size):
-        raise CheckpointError(
+        raise PlannerCheckpointError(
             f"{weights_path} was trained at image_size={stored_size} but {folder / CONFIG_FILE} says "
             f"image_size={config.image_size}"
         )
@@ -118,12 +118,12 @@ def load_checkpoint(folder: Path) -> LoadedCheckpoint:
     _check_shapes(tensors, expected, weights_path)
     goal, probe = tensors.pop(GOAL_KEY), tensors.pop(PROBE_KEY)
     if not all(bool(torch.isfinite(t).all()) for t in (*tensors.values(), goal)):
-        raise CheckpointError(f"{weights_path} holds non-finite values (NaN or inf)")
+        raise PlannerCheckpointError(f"{weights_path} holds non-finite values (NaN or inf)")
     model.load_state_dict(tensors, strict=True)
     model.eval()
     got = probe_distances(model, tokenizer, goal)
     if not torch.allclose(got, probe, rtol=PROBE_TOLERANCE, atol=PROBE_TOLERANCE):
-        raise CheckpointError(
+        raise PlannerCheckpointError(
             f"{weights_path} does not reproduce its recorded probe output at image_size="
             f"{config.image_size} (max error {float((got - probe).abs().max()):.3g}): the weights, the "
             f"vocabulary or {folder / CONFIG_FILE} were changed after saving"
@@ -135,13 +135,13 @@ def _read_config(path: Path) -> tuple[ModelConfig, dict[str, Any]]:
     try:
         body = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise CheckpointError(f"cannot parse {path}: {exc}") from exc
+        raise PlannerCheckpointError(f"cannot parse {path}: {exc}") from exc
     if not isinstance(body, dict) or body.get("format") != FORMAT:
-        raise CheckpointError(f"{path}: not a latent-planner checkpoint config (format != {FORMAT!r})")
+        raise PlannerCheckpointError(f"{path}: not a latent-planner checkpoint config (format != {FORMAT!r})")
     try:
         config = ModelConfig.from_dict(body.pop("model"))
     except (KeyError, TypeError, ValueError) as exc:
-        raise CheckpointError(f"{path}: invalid 'model' section ({exc})") from exc
+        raise PlannerCheckpointError(f"{path}: invalid 'model' section ({exc})") from exc
     return config, body
 
 
@@ -149,11 +149,11 @@ def _check_shapes(tensors: dict[str, torch.Tensor], expected: dict[str, tuple[in
     missing = sorted(set(expected) - set(tensors))
     unexpected = sorted(set(tensors) - set(expected))
     if missing or unexpected:
-        raise CheckpointError(
+        raise PlannerCheckpointError(
             f"{path} does not match its config: missing tensors {missing[:5]}, unexpected {unexpected[:5]}"
         )
     for name, shape in expected.items():
         if tuple(tensors[name].shape) != shape:
-            raise CheckpointError(
+            raise PlannerCheckpointError(
                 f"{path}: tensor {name!r} has shape {tuple(tensors[name].shape)}, the config implies {shape}"
             )

@@ -48,8 +48,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any, Literal
 
-from perception import centring
-
 Distance = Literal["cosine", "euclidean", "both"]
 InstructionMode = Literal["fixed", "varied"]
 Schedule = Literal["constant", "cosine"]
@@ -251,11 +249,6 @@ PRESET_NOTES: dict[str, str] = {
         "learning-rate decay. Else as the paper."
     ),
 }
-
-
-def default_epsilon_px(width_px: int) -> float:
-    """ε for an image `width_px` wide: the project's stopping test (10 px at 224, scaled)."""
-    return centring.default_epsilon_px(width_px)
 
 
 def run_configs(

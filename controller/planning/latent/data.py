@@ -20,8 +20,8 @@ import torch
 from tqdm import tqdm
 
 from controller.planning.actions import label_from_offset
-from controller.planning.latent.config import default_epsilon_px
-from controller.planning.latent.errors import DatasetError
+from controller.planning.latent.errors import TrainingDataError
+from core.centring import default_epsilon_px
 from core.dataset import DatasetError as ManifestError
 from core.dataset import load_manifest, read_rgb
 
@@ -88,14 +88,14 @@ def load_index(root: Path) -> DatasetIndex:
     try:
         raw_rows, meta = load_manifest(root)
     except ManifestError as exc:
-        raise DatasetError(str(exc)) from exc
+        raise TrainingDataError(str(exc)) from exc
     try:
         width, height = int(meta["camera"]["width"]), int(meta["camera"]["height"])
     except (KeyError, TypeError, ValueError) as exc:
-        raise DatasetError(f"{root / 'dataset.json'}: camera width/height missing or malformed") from exc
+        raise TrainingDataError(f"{root / 'dataset.json'}: camera width/height missing or malformed") from exc
     rows = tuple(_row(raw, root) for raw in raw_rows)
     if not rows:
-        raise DatasetError(f"{root / 'manifest.jsonl'} holds no rows")
+        raise TrainingDataError(f"{root / 'manifest.jsonl'} holds no rows")
     return DatasetIndex(root, meta, rows, width, height)
 
 
@@ -117,7 +117,7 @@ def read_image(path: Path, size: int) -> np.ndarray:
     try:
         return read_rgb(path, size)
     except ManifestError as exc:
-        raise DatasetError(str(exc)) from exc
+        raise TrainingDataError(str(exc)) from exc
 
 
 def load_images(
@@ -128,7 +128,7 @@ def load_images(
     if len(usable) < len(rows):
         log.info("%s: skipped %d rows with no target in view", desc, len(rows) - len(usable))
     if not usable:
-        raise DatasetError(f"no usable {desc} rows (target in view, offset known)")
+        raise TrainingDataError(f"no usable {desc} rows (target in view, offset known)")
     images = np.empty((len(usable), size, size, 3), dtype=np.uint8)
     for i, row in enumerate(tqdm(usable, desc=f"loading {desc}", leave=False, disable=not progress)):
         images[i] = read_image(row.image, size)

@@ -7,7 +7,7 @@ class LatentError(Exception):
     """Base class of every error raised by `controller.planning.latent`."""
 
 
-class CheckpointError(LatentError):
+class PlannerCheckpointError(LatentError):
     """A checkpoint folder is missing a file, is corrupt, or does not match its config."""
 
 
@@ -19,5 +19,5 @@ class ImageInputError(LatentError, ValueError):
     """An image handed to the planner has a shape or dtype that cannot be used."""
 
 
-class DatasetError(LatentError):
+class TrainingDataError(LatentError):
     """A dataset folder is missing files or holds malformed rows."""

@@ -8,7 +8,6 @@ paper's "vision + text generalisation" evaluation.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
 
@@ -49,11 +48,6 @@ def builtin_templates(corpus: str) -> list[str]:
 def fill(template: str, target_kind: str) -> str:
     """One concrete instruction: the template with its `{target}` slot filled (if it has one)."""
     return template.replace(SLOT, target_noun(target_kind))
-
-
-def instruction_table(templates: Sequence[str], kinds: Sequence[str]) -> dict[str, list[str]]:
-    """For each target kind, the filled instructions of `templates`."""
-    return {kind: [fill(t, kind) for t in templates] for kind in kinds}
 
 
 def tokenizer_corpus() -> list[str]:

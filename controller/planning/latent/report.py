@@ -13,8 +13,8 @@ import numpy as np
 from controller.planning.actions import Action
 from controller.planning.latent.config import PRESET_NOTES, PRESETS
 from controller.planning.latent.data import load_index, read_image
+from controller.planning.latent.experiments import BY_NAME, MAIN, TABLE2, TABLE3
 from controller.planning.latent.plots import plot_gallery, plot_heatmaps
-from controller.planning.latent.reproduce import BY_NAME, MAIN, TABLE2, TABLE3
 
 # paper.tex Table 2: (vision generalisation, vision + text generalisation), mean ± std over 5 seeds.
 PAPER_TABLE2: dict[str, tuple[str, str]] = {

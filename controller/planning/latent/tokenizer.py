@@ -20,7 +20,7 @@ import torch
 from tokenizers import Tokenizer, decoders, normalizers, pre_tokenizers, processors
 from tokenizers.models import WordPiece
 
-from controller.planning.latent.errors import CheckpointError, InstructionError
+from controller.planning.latent.errors import InstructionError, PlannerCheckpointError
 
 SPECIAL_TOKENS: tuple[str, ...] = ("[PAD]", "[UNK]", "[CLS]", "[SEP]", "[MASK]")
 PAD_ID = 0
@@ -88,11 +88,11 @@ class InstructionTokenizer:
         try:
             tokens = path.read_text(encoding="utf-8").splitlines()
         except (OSError, UnicodeDecodeError) as exc:
-            raise CheckpointError(f"cannot read tokenizer vocabulary {path}: {exc}") from exc
+            raise PlannerCheckpointError(f"cannot read tokenizer vocabulary {path}: {exc}") from exc
         vocab = {t: i for i, t in enumerate(tokens) if t}
         missing = [t for t in SPECIAL_TOKENS[:4] if t not in vocab]
         if missing or vocab.get("[PAD]") != PAD_ID:
-            raise CheckpointError(f"tokenizer vocabulary {path} lacks {missing or '[PAD] at id 0'}")
+            raise PlannerCheckpointError(f"tokenizer vocabulary {path} lacks {missing or '[PAD] at id 0'}")
         tok = _empty_tokenizer(WordPiece(vocab=vocab, unk_token="[UNK]"))
         _add_post_processor(tok)
         return cls(tok, max_tokens)

@@ -24,7 +24,7 @@ from controller.planning.latent.augment import augment, label_exact, labels_of
 from controller.planning.latent.checkpoint import save_checkpoint
 from controller.planning.latent.config import ModelConfig, TrainConfig
 from controller.planning.latent.data import ImageSet, load_images, load_index, split_train_val, to_float
-from controller.planning.latent.errors import DatasetError
+from controller.planning.latent.errors import TrainingDataError
 from controller.planning.latent.evaluate import goal_embedding, pair_instructions, predict_distances, score
 from controller.planning.latent.instructions import builtin_templates, fill, tokenizer_corpus
 from controller.planning.latent.losses import LossTerms, distance, total_loss
@@ -83,9 +83,9 @@ def train(
     else:
         goals = load_images(index.split("goal"), model_cfg.image_size, eps, desc="goal", progress=progress)
     if len(goals) == 0:
-        raise DatasetError(f"{data_dir}: no goal images for the goal prototype")
+        raise TrainingDataError(f"{data_dir}: no goal images for the goal prototype")
     if len(train_set) < cfg.batch_size // 4:
-        raise DatasetError(
+        raise TrainingDataError(
             f"{data_dir}: only {len(train_set)} training images; need at least a quarter batch"
         )
 

@@ -1,9 +1,18 @@
-"""`FakeVehicle`: a kinematic stand-in for unit tests of the code around the flight backends.
+"""`FakeVehicle`: the one kinematic stand-in for unit tests of the code around the flight backends.
 
-Simulated clock, velocity that follows the command with a first-order lag, PX4's
-client-visible rules (setpoint before offboard, takeoff only when armed), and a
-record of every command that reached it, so tests can check what the safety
-layer let through.
+A point in NED on a simulated clock (time advances only in `sleep()`), with PX4's
+client-visible rules (a setpoint before offboard, takeoff only when armed, velocity
+commands act only in OFFBOARD) and a record of every call and command that reached
+it, so a test can check what the safety layer or the loop let through.
+
+Two ways to start:
+- `FakeVehicle()` on the ground, facing `yaw_deg`: arming, takeoff (climbs to its
+  altitude), offboard; velocity follows the command with a first-order lag `lag_s`
+  (the flight-layer tests);
+- `FakeVehicle.at_pose(east_m, up_m)`: already hovering in offboard at a pose in front
+  of the target, facing north, velocity exact (lag 0) (the loop and mission tests, with
+  `mission_fakes.FakeDetector` deriving the target's pixels from the pose).
+`fail_on_move=N` raises on the N-th moving command (a link that dies mid-flight).
 """
 
 from __future__ import annotations
@@ -15,16 +24,25 @@ from flight.errors import CommandDeniedError
 from flight.types import Attitude, FlightMode, PositionNed, Telemetry, VelocityBody, VelocityNed
 from flight.vehicle import Vehicle
 
+STEP_S = 0.01
+
 
 class FakeVehicle(Vehicle):
     realtime = False
 
-    def __init__(self, yaw_deg: float = 0.0, lag_s: float = 0.2, realtime: bool = False) -> None:
+    def __init__(
+        self,
+        yaw_deg: float = 0.0,
+        lag_s: float = 0.2,
+        realtime: bool = False,
+        fail_on_move: int | None = None,
+    ) -> None:
         self.realtime = realtime
         self.yaw_deg = yaw_deg
         self.lag_s = lag_s
+        self.fail_on_move = fail_on_move
         self.now_s = 0.0
-        self.position = [0.0, 0.0, 0.0]
+        self.position = [0.0, 0.0, 0.0]  # NED from home
         self.velocity = [0.0, 0.0, 0.0]
         self.armed = False
         self.in_air = False
@@ -32,8 +50,27 @@ class FakeVehicle(Vehicle):
         self.setpoint: VelocityBody | None = None
         self.commands: list[VelocityBody] = []
         self.calls: list[str] = []
+        self.moves_commanded = 0
         self.closed = False
+        self._takeoff_climbs = True
 
+    @classmethod
+    def at_pose(cls, east_m: float = 0.0, up_m: float = 0.0, fail_on_move: int | None = None) -> FakeVehicle:
+        """Hovering in offboard `east_m` right of and `up_m` above the centred pose, exact kinematics."""
+        vehicle = cls(lag_s=0.0, fail_on_move=fail_on_move)
+        vehicle.position = [0.0, east_m, -up_m]
+        vehicle.mode, vehicle.setpoint, vehicle._takeoff_climbs = FlightMode.OFFBOARD, VelocityBody(), False
+        return vehicle
+
+    @property
+    def east_m(self) -> float:
+        return self.position[1]
+
+    @property
+    def up_m(self) -> float:
+        return -self.position[2]
+
+    # ------------------------------------------------------------------ physics
     def _target_ned(self) -> tuple[float, float, float]:
         if self.mode != FlightMode.OFFBOARD or self.setpoint is None:
             return (0.0, 0.0, 0.0)
@@ -42,14 +79,21 @@ class FakeVehicle(Vehicle):
         return (north, east, sp.down_m_s)
 
     def sleep(self, seconds: float) -> None:
-        steps = max(1, round(seconds / 0.01)) if seconds > 0 else 0
-        for _ in range(steps):
+        if seconds <= 0:
+            return
+        if self.lag_s == 0.0:  # exact: the velocity is the command
+            self.velocity = list(self._target_ned())
+            for i in range(3):
+                self.position[i] += self.velocity[i] * seconds
+            self.now_s += seconds
+            return
+        for _ in range(max(1, round(seconds / STEP_S))):
             target = self._target_ned()
-            alpha = min(1.0, 0.01 / self.lag_s)
+            alpha = min(1.0, STEP_S / self.lag_s)
             for i in range(3):
                 self.velocity[i] += alpha * (target[i] - self.velocity[i])
-                self.position[i] += self.velocity[i] * 0.01
-            self.now_s += 0.01
+                self.position[i] += self.velocity[i] * STEP_S
+            self.now_s += STEP_S
 
     def time_s(self) -> float:
         return self.now_s
@@ -65,6 +109,7 @@ class FakeVehicle(Vehicle):
             timestamp_s=self.now_s,
         )
 
+    # ----------------------------------------------------------------- commands
     def connect(self, timeout_s: float | None = None) -> None:
         self.calls.append("connect")
 
@@ -80,8 +125,9 @@ class FakeVehicle(Vehicle):
         if not self.armed:
             raise CommandDeniedError("takeoff()", "COMMAND_DENIED", "not armed")
         self.in_air = True
-        self.position[2] = -altitude_m
-        self.mode = FlightMode.HOLD
+        if self._takeoff_climbs:
+            self.position[2] = -altitude_m
+            self.mode = FlightMode.HOLD
 
     def start_offboard(self, timeout_s: float | None = None) -> None:
         self.calls.append("start_offboard")
@@ -90,8 +136,14 @@ class FakeVehicle(Vehicle):
         self.mode = FlightMode.OFFBOARD
 
     def set_velocity_body(self, velocity: VelocityBody) -> None:
+        if not velocity.is_zero() and velocity != self.setpoint:
+            self.moves_commanded += 1
+            if self.fail_on_move is not None and self.moves_commanded >= self.fail_on_move:
+                raise RuntimeError("FakeVehicle: simulated link failure")
         self.setpoint = velocity
         self.commands.append(velocity)
+        if self.lag_s == 0.0:
+            self.velocity = list(self._target_ned())
 
     def hold(self) -> None:
         self.calls.append("hold")
@@ -103,6 +155,8 @@ class FakeVehicle(Vehicle):
     def stop_offboard(self, timeout_s: float | None = None) -> None:
         self.calls.append("stop_offboard")
         if self.mode == FlightMode.OFFBOARD:
+            self.setpoint = VelocityBody()
+            self.velocity = [0.0, 0.0, 0.0] if self.lag_s == 0.0 else self.velocity
             self.mode = FlightMode.HOLD
 
     def land(self, timeout_s: float | None = None) -> None:

@@ -110,7 +110,7 @@ def write_synthetic_dataset(
     meta = {
         "generator_version": "synthetic-fixture-1",
         "seed": seed,
-        "created_by": "controller.planning.latent.synthetic (test fixture, not the simulator)",
+        "created_by": "tests/latent_synthetic.py (test fixture, not the simulator)",
         "camera": {"width": size, "height": size, "hfov_deg": 60.0},
         "scene_config": {},
         "counts": {s: n for s, n, _ in plan},

@@ -1,0 +1,181 @@
+"""The MAVSDK backend's link: its configuration, resending lost commands, and the telemetry cache.
+
+`TelemetryCache` subscribes to MAVSDK's telemetry streams and keeps their latest values
+under a lock. MAVSDK's sync callbacks all run on one MAVSDK thread, and blocking calls
+return through it: the callbacks here only store values (and tell the link monitor the
+vehicle was heard). `flight.mavsdk_backend.MavsdkVehicle` reads the cache.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from mavsdk import log_subscribe
+from mavsdk.logging import LogLevel
+from mavsdk.plugins.action import ActionError
+from mavsdk.plugins.offboard import OffboardError
+from mavsdk.plugins.telemetry import Telemetry as MavsdkTelemetry
+
+from flight.link import LinkMonitor
+from flight.safety import FlightTimeouts
+from flight.types import Attitude, FlightMode, PositionNed, Telemetry, VelocityNed
+from flight.urls import validate_connection_url
+
+log = logging.getLogger(__name__)
+
+_NAN3 = (math.nan, math.nan, math.nan)
+
+
+@dataclass(frozen=True)
+class MavsdkConfig:
+    """How to reach the vehicle and how long to wait for it."""
+
+    url: str = "udpin://0.0.0.0:14540"
+    timeouts: FlightTimeouts = field(default_factory=FlightTimeouts)
+    link_timeout_s: float = 2.0
+    arm_retry_period_s: float = 0.5
+    altitude_tolerance_m: float = 0.3
+    climb_done_speed_m_s: float = 0.2  # takeoff ends when the climb has (nearly) stopped
+    poll_s: float = 0.02
+    expected_system_id: int | None = None
+    shown_url: str | None = None
+    """The vehicle's URL as the user gave it, for messages, when MAVSDK listens behind a relay elsewhere."""
+    clock: str = "wall"  # or "vehicle": the autopilot's clock (see the module docstring)
+
+    def __post_init__(self) -> None:
+        validate_connection_url(self.url)
+        if self.clock not in ("wall", "vehicle"):
+            raise ValueError(f"MavsdkConfig.clock must be 'wall' or 'vehicle', got {self.clock!r}")
+        if self.expected_system_id is not None and not 1 <= self.expected_system_id <= 255:
+            raise ValueError(f"MavsdkConfig.expected_system_id must be 1..255, got {self.expected_system_id}")
+        if not (self.link_timeout_s > 0 and self.arm_retry_period_s > 0 and self.poll_s > 0):
+            raise ValueError("MavsdkConfig: link_timeout_s, arm_retry_period_s and poll_s must be > 0")
+
+
+COMMAND_ATTEMPTS = 3
+
+
+def resend_on_timeout(call: Callable[[], Any], attempts: int = COMMAND_ATTEMPTS) -> Any:
+    """Run a MAVSDK command, sending it again when it timed out (every ack lost on a lossy link).
+
+    MAVSDK already resends a command four times, 0.5 s apart, before TIMEOUT; on a radio that
+    loses a fifth of the packets each way that still fails about once in 170 commands. These
+    commands (takeoff, hold, land, disarm, offboard start/stop) are idempotent on PX4, so sending
+    them again is safe. Any other result is raised at once.
+    """
+    for attempt in range(1, attempts + 1):
+        try:
+            return call()
+        except (ActionError, OffboardError) as exc:
+            if exc.result.name != "TIMEOUT" or attempt == attempts:
+                raise
+            log.warning(
+                "%s timed out (no ack): sending it again (%d of %d)", exc.origin, attempt + 1, attempts
+            )
+    return None
+
+
+def route_mavsdk_logs() -> None:
+    """Send the C library's log lines to Python logging instead of coloured stderr."""
+    mavsdk_log = logging.getLogger("mavsdk")
+    levels = {LogLevel.DEBUG: logging.DEBUG, LogLevel.INFO: logging.INFO, LogLevel.WARN: logging.WARNING}
+
+    def forward(level: LogLevel, message: str, _file: str | None, _line: int) -> bool:
+        mavsdk_log.log(levels.get(level, logging.ERROR), "%s", message)
+        return True
+
+    log_subscribe(forward)
+
+
+class TelemetryCache:
+    """The latest of every telemetry stream the backend reads, stored by MAVSDK's callback thread."""
+
+    def __init__(self, link_timeout_s: float) -> None:
+        self.lock = threading.Lock()
+        self.position: tuple[float, float, float] = _NAN3
+        self.velocity: tuple[float, float, float] = _NAN3
+        self.attitude: tuple[float, float, float] = _NAN3
+        self.armed = False
+        self.in_air = False
+        self.mode = FlightMode.UNKNOWN
+        self.battery_percent: float | None = None
+        self.local_position_ok = False
+        self.home_ok = False
+        self.texts: deque[str] = deque(maxlen=100)
+        self.texts_received = 0  # all STATUSTEXTs so far (the deque keeps the latest only)
+        self.vehicle_time_s = math.nan  # the autopilot's clock, from its ATTITUDE timestamps
+        self.link = LinkMonitor(link_timeout_s)
+
+    def subscribe(self, system: Any, tel: MavsdkTelemetry) -> None:
+        def store(fn: Callable[[Any], None]) -> Callable[[Any, Any], None]:
+            def callback(data: Any, _user_data: Any) -> None:
+                with self.lock:
+                    fn(data)
+                self.link.heard()
+
+            return callback
+
+        def pos_vel(d: Any) -> None:
+            self.position = (d.position.north_m, d.position.east_m, d.position.down_m)
+            self.velocity = (d.velocity.north_m_s, d.velocity.east_m_s, d.velocity.down_m_s)
+
+        def attitude(d: Any) -> None:
+            self.attitude = (d.roll_deg, d.pitch_deg, d.yaw_deg)
+            stamp_s = d.timestamp_us * 1e-6 if d.timestamp_us else math.nan
+            if not stamp_s <= self.vehicle_time_s:  # the first stamp, or a newer one (never backwards)
+                self.vehicle_time_s = stamp_s
+
+        def health(d: Any) -> None:
+            self.local_position_ok, self.home_ok = d.is_local_position_ok, d.is_home_position_ok
+
+        def battery(d: Any) -> None:
+            self.battery_percent = None if math.isnan(d.remaining_percent) else d.remaining_percent
+
+        def status_text(d: Any) -> None:
+            self.texts.append(f"{d.type.name}: {d.text}")
+            self.texts_received += 1
+
+        tel.subscribe_position_velocity_ned(store(pos_vel))
+        tel.subscribe_attitude_euler(store(attitude))
+        tel.subscribe_armed(store(lambda d: setattr(self, "armed", bool(d))))
+        tel.subscribe_in_air(store(lambda d: setattr(self, "in_air", bool(d))))
+        tel.subscribe_flight_mode(
+            store(lambda d: setattr(self, "mode", FlightMode.__members__.get(d.name, FlightMode.OTHER)))
+        )
+        tel.subscribe_health(store(health))
+        tel.subscribe_battery(store(battery))
+        tel.subscribe_status_text(store(status_text))
+        system.subscribe_is_connected(lambda connected, _ud: self.link.set_connected(bool(connected)))
+
+    def snapshot(self, timestamp_s: float) -> Telemetry:
+        with self.lock:
+            return Telemetry(
+                position_ned=PositionNed(*self.position),
+                velocity_ned=VelocityNed(*self.velocity),
+                attitude=Attitude(*self.attitude),
+                armed=self.armed,
+                in_air=self.in_air,
+                flight_mode=self.mode,
+                timestamp_s=timestamp_s,
+                battery_remaining_percent=self.battery_percent,
+            )
+
+    def all_texts(self) -> list[str]:
+        with self.lock:
+            return list(self.texts)
+
+    def last_text(self) -> str:
+        with self.lock:
+            return self.texts[-1] if self.texts else ""
+
+    def texts_since(self, count: int) -> str:
+        """The texts after the first `count` received, "; "-joined (as many as are still kept)."""
+        with self.lock:
+            new = min(self.texts_received - count, len(self.texts))
+            return "; ".join(list(self.texts)[len(self.texts) - new :]) if new > 0 else ""
