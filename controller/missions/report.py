@@ -9,7 +9,7 @@ the GIF. Nothing in the folder is needed to fly: it is for people and CI.
 OUT/report.json       mission, outcome, judgement, steps, final offsets (truth, detector), timing
 OUT/trajectory.png    the drone's path in the wall plane, and |offset| per step
 OUT/camera.gif        each step's frame with bbox, ε box and the chosen action drawn on it
-OUT/flight.tlog       MAVLink telemetry log (MAVLink flights only; see mission_runner)
+OUT/flight.tlog       MAVLink telemetry log (MAVLink flights only; see runner)
 ```
 """
 

@@ -37,7 +37,7 @@ class MissionResult:
     error: str | None = None
     tags: tuple[str, ...] = ()
     refinement_moves: int = 0
-    """Boundary refinement moves the loop flew after the planner chose "no move" (see centring_loop)."""
+    """Boundary refinement moves the loop flew after the planner chose "no move" (see planning.loop)."""
     info: dict[str, Any] = field(default_factory=dict)
     vehicle_clock_s: dict[str, float] = field(default_factory=dict)
     files: dict[str, str | None] = field(default_factory=dict)

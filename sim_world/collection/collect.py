@@ -1,4 +1,4 @@
-"""`dronectl collect`: render the paper's dataset in the simulated world (protocol in `collect_plan`).
+"""`dronectl collect`: render the paper's dataset in the simulated world (protocol in `plan`).
 
 The plan is split by scene; each scene's images are rendered by one worker process
 (one PyBullet client, the scene built once), which writes the PNGs itself and hands

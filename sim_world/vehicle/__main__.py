@@ -1,7 +1,7 @@
 """The simulated vehicle's process entry point: `python -m sim_world.vehicle --config FILE.json`.
 
 What launchers start (`flight.sim_launcher`: the sim-mavlink missions, the flight tests and
-benchmark); the config is `sim_vehicle_main.run_to_json`'s form of a `SimVehicleRun`. It
+benchmark); the config is `serve.run_to_json`'s form of a `SimVehicleRun`. It
 watches its parent and stops when the parent is gone. People use `dronectl sim-vehicle`.
 """
 
