@@ -234,7 +234,8 @@ class Px4Bridge:
                 raise Px4DisconnectedError(
                     f"PX4 sent nothing for {timing.px4_silent_timeout_s:.1f} s on the simulator link"
                 )
-            if time.monotonic() - start >= wait_s:
+            wait_s = timing.answer_timeout_s if self._stats.lockstep else timing.boot_answer_wait_s
+            if time.monotonic() - start >= wait_s:  # the wait as it stands now: lockstep may have begun
                 if self._stats.lockstep:
                     self._stats.late_answers += 1
                     log.warning("no PX4 answer for t=%d us within %.1f s: stepping on", time_usec, wait_s)
