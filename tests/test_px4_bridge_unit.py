@@ -207,6 +207,7 @@ def test_px4_run_gets_links_its_params_and_a_private_folder(tmp_path: Path) -> N
         assert "param set MAV_SYS_ID 42" in script
         assert "param set MPC_XY_VEL_MAX 1.5" in script
         assert "param set COM_OF_LOSS_T 4" in script  # 4× faster than real time: 4× longer timeouts
+        assert "param set NAV_MC_ALT_RAD 0.1" in script  # a 0.5 m takeoff climbs to 0.5 m, not to liftoff
     finally:
         process.close()
     assert not process.workdir.exists()

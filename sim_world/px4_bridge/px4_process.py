@@ -110,6 +110,12 @@ LINK_LOSS_TIMEOUTS_S = {
 (MAVSDK re-sends at 20 Hz of wall time), the data link's heartbeats (1 Hz), RC, onboard computer."""
 
 
+LOW_TAKEOFF_PARAMS = {"NAV_MC_ALT_RAD": 0.1}
+"""Set on every run: PX4's takeoff counts as reached within NAV_MC_ALT_RAD of its altitude (0.8 m by
+default), so a takeoff to 0.5 m, the lowest a mission asks for, ended at liftoff around 0.2 m and
+Hold kept that height. 0.1 m makes a low takeoff climb to its altitude; a mission's `px4.params` wins."""
+
+
 def speed_scaled_timeouts(speed_factor: float | None) -> dict[str, float]:
     """PX4's link-loss timeouts for a simulation `speed_factor` × real time (what PX4's rcS does with
     PX4_SIM_SPEED_FACTOR, without needing `bc`): a 20 Hz wall-clock setpoint stream is 20/speed Hz
@@ -201,7 +207,8 @@ class Px4Process:
         lines = ["#!/bin/sh", "# written by drone-inspect for this run: sourced by PX4's rcS"]
         if self.options.system_id is not None:
             lines.append(f"param set MAV_SYS_ID {self.options.system_id}")
-        params = dict(speed_scaled_timeouts(self.options.speed_factor))
+        params = dict(LOW_TAKEOFF_PARAMS)
+        params.update(speed_scaled_timeouts(self.options.speed_factor))
         params.update(self.options.params)
         for name, value in params.items():
             lines.append(f"param set {name} {float(value):g}")
