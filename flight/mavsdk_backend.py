@@ -51,6 +51,7 @@ log = logging.getLogger(__name__)
 _RETRY_ARM = {ActionResult.COMMAND_DENIED, ActionResult.BUSY, ActionResult.TIMEOUT, ActionResult.FAILED}
 READY_REPORT_EVERY_S = 5.0
 DISARM_RACE_WAIT_S = 3.0
+OFFBOARD_START_ATTEMPTS = 3
 
 
 class MavsdkVehicle(Vehicle):
@@ -69,6 +70,7 @@ class MavsdkVehicle(Vehicle):
         self._action: Action | None = None
         self._offboard: Offboard | None = None
         self._setpoint_set = False
+        self._last_setpoint = VelocityBody()
         self._in_offboard = False
         self._ground_down_m = math.nan
 
@@ -270,6 +272,7 @@ class MavsdkVehicle(Vehicle):
             offboard.set_velocity_body(setpoint)
         except OffboardError as exc:
             raise CommandDeniedError("set_velocity_body()", exc.result.name) from None
+        self._last_setpoint = velocity
         self._setpoint_set = True
         self.setpoints_sent += 1
 
@@ -290,10 +293,19 @@ class MavsdkVehicle(Vehicle):
                 "NO_SETPOINT_SET",
                 "set a velocity setpoint first: PX4 needs a setpoint stream",
             )
-        try:
-            resend_on_timeout(offboard.start)
-        except OffboardError as exc:
-            raise CommandDeniedError("start_offboard()", exc.result.name, self._last_text()) from None
+        # PX4 refuses offboard unless a setpoint reached it in the last 0.5 s, and MAVSDK sends the first
+        # one once: on a lossy link, send it a few times and retry a refusal, a bounded number of times.
+        for attempt in range(1, OFFBOARD_START_ATTEMPTS + 1):
+            for _ in range(3):
+                self.set_velocity_body(self._last_setpoint)
+                self.sleep(0.05)
+            try:
+                resend_on_timeout(offboard.start)
+                break
+            except OffboardError as exc:
+                if exc.result.name != "COMMAND_DENIED" or attempt == OFFBOARD_START_ATTEMPTS:
+                    raise CommandDeniedError("start_offboard()", exc.result.name, self._last_text()) from None
+                log.info("offboard refused (%s): sending the setpoint again", self._last_text())
         self._confirm_mode(FlightMode.OFFBOARD, timeout_s, "start_offboard()")
         with self._cache.lock:
             self._texts_at_offboard = self._cache.texts_received

@@ -156,7 +156,11 @@ def test_params_round_trip_and_takeoff_reaches_mis_takeoff_alt_then_loiters():
 
         t0 = take_off(client, 1.5)
         wait_mode(client, modes.AUTO_TAKEOFF, 2.0, after=t0)
-        climbing = client.wait_for("EXTENDED_SYS_STATE", 2.0, after=t0)
+        # A state sent just before the vehicle read the command may still arrive after t0 on a loaded
+        # machine: wait for the takeoff state itself (a timeout if it is never reported).
+        climbing = client.wait_for(
+            "EXTENDED_SYS_STATE", 4.0, lambda m: m.landed_state == M.MAV_LANDED_STATE_TAKEOFF, after=t0
+        )
         assert climbing.landed_state == M.MAV_LANDED_STATE_TAKEOFF
         wait_mode(client, modes.AUTO_LOITER, 8.0, after=t0)
         t_loiter = time.monotonic()
