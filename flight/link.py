@@ -57,3 +57,11 @@ class LinkMonitor:
             connected = self._connected
         if silent_s > self.timeout_s or (not connected and silent_s > self.quiet_s):
             raise LinkLostError(origin, silent_s, self.timeout_s)
+
+    def raise_if_lost(self, origin: str, quiet_s: float = 0.5, poll_s: float = 0.05) -> None:
+        """After a command timed out: if the vehicle has been quiet for `quiet_s`, wait for the verdict
+        (at most until the link timeout, as silence only grows) and raise `LinkLostError` if the link is
+        lost; return as soon as the vehicle is heard again."""
+        while self.silent_s() > quiet_s:
+            self.check(origin)
+            time.sleep(poll_s)

@@ -303,6 +303,8 @@ class MavsdkVehicle(Vehicle):
                 resend_on_timeout(offboard.start)
                 break
             except OffboardError as exc:
+                if exc.result.name == "TIMEOUT":  # a vehicle gone silent is a lost link, not a refusal
+                    self._cache.link.raise_if_lost("start_offboard()")
                 if exc.result.name != "COMMAND_DENIED" or attempt == OFFBOARD_START_ATTEMPTS:
                     raise CommandDeniedError("start_offboard()", exc.result.name, self._last_text()) from None
                 log.info("offboard refused (%s): sending the setpoint again", self._last_text())

@@ -52,9 +52,7 @@ def _imports(path: Path, module: str, top_level_only: bool = False) -> set[str]:
             found.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom) and node.module:
             if node.level:  # relative: resolve against the package
-                base = (
-                    module.split(".")[: -node.level] if path.name != "__init__.py" else module.split(".")
-                )
+                base = module.split(".")[: -node.level] if path.name != "__init__.py" else module.split(".")
                 found.add(".".join([*base, node.module]))
             else:
                 found.add(node.module)

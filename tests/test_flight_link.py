@@ -78,3 +78,19 @@ def test_mavsdk_disconnect_is_link_loss_once_telemetry_is_quiet_too() -> None:
         link.check("arm()")
     link.heard()
     link.check("arm()")
+
+
+def test_a_command_timeout_on_a_silent_vehicle_is_a_lost_link_and_on_a_live_one_returns_at_once() -> None:
+    now = [0.0]
+
+    def clock() -> float:
+        now[0] += 0.05  # every look at the clock is 50 ms later
+        return now[0]
+
+    silent = LinkMonitor(timeout_s=1.0, clock=clock)
+    now[0] += 0.6  # quiet for 0.6 s when the command times out
+    with pytest.raises(LinkLostError):
+        silent.raise_if_lost("start_offboard()", poll_s=0.0)
+    live = LinkMonitor(timeout_s=1.0, clock=clock)
+    live.heard()
+    live.raise_if_lost("start_offboard()", poll_s=0.0)  # heard just now: no verdict to wait for

@@ -56,9 +56,13 @@ def wait_mode(client: MavlinkTestClient, mode: modes.Px4Mode, timeout_s: float, 
 
 def take_off(client: MavlinkTestClient, altitude_m: float) -> float:
     """Arm and take off to `altitude_m` (set as MIS_TAKEOFF_ALT); returns the time of the command."""
+    sent = time.monotonic()
     client.send(M.MAVLink_param_set_message(1, 1, b"MIS_TAKEOFF_ALT", altitude_m, M.MAV_PARAM_TYPE_REAL32))
     client.wait_for(
-        "PARAM_VALUE", 2.0, lambda m: m.param_id == "MIS_TAKEOFF_ALT" and m.param_value == altitude_m
+        "PARAM_VALUE",
+        2.0,
+        lambda m: m.param_id == "MIS_TAKEOFF_ALT" and m.param_value == altitude_m,
+        after=sent,
     )
     assert client.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) == [ACCEPTED]
     t0 = time.monotonic()
@@ -114,8 +118,9 @@ def test_heartbeat_identity_mode_encoding_and_telemetry():
         )
         time.sleep(0.3)
         assert client.since(t0, "COMMAND_ACK") == []  # addressed to another system
+        sent = time.monotonic()
         client.send(M.MAVLink_ping_message(123, 7, 0, 0))
-        assert client.wait_for("PING", 1.0).seq == 7
+        assert client.wait_for("PING", 1.0, after=sent).seq == 7
 
 
 def test_arming_refused_during_boot_delay_then_accepted():
@@ -136,13 +141,15 @@ def test_arming_refused_during_boot_delay_then_accepted():
 
 def test_params_round_trip_and_takeoff_reaches_mis_takeoff_alt_then_loiters():
     with sim(14604, speed=2.0) as (client, _):
+        t0 = time.monotonic()  # before sending: on a loaded machine the answer may beat the wait
         client.send(M.MAVLink_param_request_read_message(1, 1, b"MIS_TAKEOFF_ALT", -1))
-        value = client.wait_for("PARAM_VALUE", 2.0)
+        value = client.wait_for("PARAM_VALUE", 2.0, after=t0)
         assert (value.param_id, value.param_value, value.param_type) == ("MIS_TAKEOFF_ALT", 2.5, 9)
         store = ParameterStore()
         spec = store.spec("COM_OBL_RC_ACT")
+        t0 = time.monotonic()
         client.send(M.MAVLink_param_set_message(1, 1, b"COM_OBL_RC_ACT", encode_param_value(spec, 5), 6))
-        echo = client.wait_for("PARAM_VALUE", 2.0, lambda m: m.param_id == "COM_OBL_RC_ACT")
+        echo = client.wait_for("PARAM_VALUE", 2.0, lambda m: m.param_id == "COM_OBL_RC_ACT", after=t0)
         assert echo.param_value == encode_param_value(spec, 5) and echo.param_type == M.MAV_PARAM_TYPE_INT32
         t0 = time.monotonic()
         client.send(M.MAVLink_param_set_message(1, 1, b"MIS_TAKEOFF_ALT", 1000.0, 9))  # out of range
