@@ -1,4 +1,5 @@
-"""One discrete move: fly a body velocity for a duration, hold until settled, measure what happened.
+"""One discrete move: fly a body velocity for a duration, hold until settled, measure what happened;
+and the way every flight gets to its first move (`take_off_to_start`).
 
 The achieved displacement comes from telemetry, never from velocity × time:
 velocity offboard drifts (on real PX4 a 0.5 m/s × 2 s move gave 0.3–0.9 m), so
@@ -10,15 +11,19 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from core.frames import world_ned_to_heading
 from flight.types import Displacement, PositionNed, VelocityBody
-from flight.vehicle import Vehicle
+from flight.vehicle import Vehicle, wait_for
 
 log = logging.getLogger(__name__)
 
 _CLOCK_SLACK_S = 1e-3
+HOVER_M_S = 0.15
+"""Below this speed after a takeoff the vehicle counts as hovering (`take_off_to_start`)."""
+HOVER_TIMEOUT_S = 15.0
 
 
 @dataclass(frozen=True)
@@ -105,3 +110,47 @@ def execute_move(
         settle_time_s=settle_time_s,
         wall_time_s=time.perf_counter() - wall_start,
     )
+
+
+def fly_offset(
+    vehicle: Vehicle,
+    right_m: float,
+    up_m: float,
+    speed_m_s: float,
+    settle_speed_m_s: float = 0.1,
+    settle_timeout_s: float = 5.0,
+) -> MoveResult:
+    """One move of (`right_m`, `up_m`) in the body frame: the longer axis flies at `speed_m_s`, the
+    shorter one slower, so both arrive together. A move of zero on both axes is not a move."""
+    if not speed_m_s > 0.0:
+        raise ValueError(f"speed_m_s must be > 0, got {speed_m_s!r}")
+    duration_s = max(abs(right_m), abs(up_m)) / speed_m_s
+    if duration_s == 0.0:
+        raise ValueError("fly_offset: a move of 0 m on both axes")
+    velocity = VelocityBody(right_m_s=right_m / duration_s, down_m_s=-up_m / duration_s)
+    return execute_move(
+        vehicle, velocity, duration_s, settle_speed_m_s=settle_speed_m_s, settle_timeout_s=settle_timeout_s
+    )
+
+
+def take_off_to_start(
+    vehicle: Vehicle,
+    altitude_m: float,
+    place_at_start: Callable[[], None] | None = None,
+    clock: dict[str, float] | None = None,
+) -> None:
+    """Ready, arm, take off to `altitude_m`, (a simulator: place the drone at the start pose), wait for
+    a hover, and enter offboard with a zero setpoint. `clock` gets "ready_s" and "offboard_s" (vehicle
+    clock)."""
+    clock = {} if clock is None else clock
+    vehicle.wait_ready()
+    clock["ready_s"] = vehicle.time_s()
+    vehicle.arm()
+    vehicle.takeoff(altitude_m)
+    if place_at_start is not None:
+        place_at_start()
+    # A takeoff returns near its altitude, still climbing: start from a hover.
+    wait_for(vehicle, lambda t: t.velocity_ned.speed_m_s < HOVER_M_S, HOVER_TIMEOUT_S, "takeoff()", "a hover")
+    vehicle.set_velocity_body(VelocityBody())  # PX4 needs a setpoint before offboard
+    vehicle.start_offboard()
+    clock["offboard_s"] = vehicle.time_s()

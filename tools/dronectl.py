@@ -29,6 +29,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "fly": ("tools.fly_cmd", "fly one centring mission and write a report"),
     "missions": ("tools.missions_cmd", "run a mission suite: `missions run DIR`"),
     "benchmark-missions": ("tools.benchmark_missions_cmd", "randomised missions, planners side by side"),
+    "gym-eval": ("tools.gym_eval_cmd", "policies in the Gymnasium environment DroneInspect/Centring-v0"),
     "fault-matrix": ("tools.fault_matrix_cmd", "the same missions under each injected fault, as a table"),
 }
 

@@ -33,16 +33,12 @@ from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission
 from controller.planning.loop import CentringLoop
 from controller.planning.loop_records import CentringConfig, Outcome, count_refinements
 from core.centring import default_epsilon_px
+from flight.moves import take_off_to_start
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, flight_guard
 from flight.signals import StopRequested
-from flight.types import VelocityBody
-from flight.vehicle import Vehicle, wait_for
 
 log = logging.getLogger(__name__)
-
-SETTLED_M_S = 0.15
-SETTLE_TIMEOUT_S = 15.0
 
 
 def epsilon_for(mission: Mission, kit: FlightKit) -> float:
@@ -59,22 +55,6 @@ def loop_config(mission: Mission, epsilon_px: float, instruction: str) -> Centri
         stop_margin_px=mission.stop_margin_px,
         **mission.loop.as_kwargs(),
     )
-
-
-def _take_off_to_start(vehicle: Vehicle, kit: FlightKit, mission: Mission, clock: dict[str, float]) -> None:
-    vehicle.wait_ready()
-    clock["ready_s"] = vehicle.time_s()
-    vehicle.arm()
-    vehicle.takeoff(kit.takeoff_altitude_m or mission.takeoff_altitude_m)
-    if kit.place_at_start is not None:
-        kit.place_at_start()
-    # A takeoff returns near its altitude, still climbing: start the loop from a hover.
-    wait_for(
-        vehicle, lambda t: t.velocity_ned.speed_m_s < SETTLED_M_S, SETTLE_TIMEOUT_S, "takeoff()", "a hover"
-    )
-    vehicle.set_velocity_body(VelocityBody())  # PX4 needs a setpoint before offboard
-    vehicle.start_offboard()
-    clock["offboard_s"] = vehicle.time_s()
 
 
 def fly_kit(
@@ -119,7 +99,8 @@ def fly_kit(
         vehicle.connect()
         clock["connected_s"] = vehicle.time_s()
         with flight_guard(vehicle):
-            _take_off_to_start(vehicle, kit, mission, clock)
+            altitude_m = kit.takeoff_altitude_m or mission.takeoff_altitude_m
+            take_off_to_start(vehicle, altitude_m, kit.place_at_start, clock)
             vehicle_start_s = vehicle.time_s()
             result = loop.run()
             outcome, message = result.outcome, result.message

@@ -80,8 +80,7 @@ from controller.planning.loop_records import (
 )
 from controller.planning.planners import Observation, Planner
 from core.centring import default_stop_margin_px, is_centred, offset_px
-from flight.moves import MoveResult, execute_move
-from flight.types import VelocityBody
+from flight.moves import MoveResult, fly_offset
 from flight.vehicle import Vehicle
 from perception.camera import Camera
 from perception.detector import Detector
@@ -303,14 +302,8 @@ class CentringLoop:
 
     def _fly(self, right_m: float, up_m: float) -> MoveResult:
         cfg = self.config
-        duration_s = max(abs(right_m), abs(up_m)) / cfg.speed_m_s
-        velocity = VelocityBody(right_m_s=right_m / duration_s, down_m_s=-up_m / duration_s)
-        return execute_move(
-            self.vehicle,
-            velocity,
-            duration_s,
-            settle_speed_m_s=cfg.settle_speed_m_s,
-            settle_timeout_s=cfg.settle_timeout_s,
+        return fly_offset(
+            self.vehicle, right_m, up_m, cfg.speed_m_s, cfg.settle_speed_m_s, cfg.settle_timeout_s
         )
 
     def _keep(self, record: StepRecord) -> None:

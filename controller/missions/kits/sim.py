@@ -13,6 +13,7 @@ import logging
 import math
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
 from typing import Any
 
 from controller.missions.kits.base import FlightKit, LoadedModels, image_detector_for, planner_for
@@ -47,11 +48,32 @@ def sim_detector(mission: Mission, world: World, camera: SimCamera, models: Load
     )
 
 
+@dataclass
+class SimWorld:
+    """The in-process world of one mission: PyBullet world, vehicle behind the safety limits, camera."""
+
+    world: World
+    vehicle: SafeVehicle
+    camera: SimCamera
+    start: StartOffset
+
+    def place_at_start(self) -> None:
+        """Put the drone at the mission's start pose (the scenario's set-up, not a way to fly)."""
+        start = self.start
+        position, yaw = self.world.scene.pose_for_offset(
+            start.right_m, start.up_m, start.distance_m, start.yaw_deg
+        )
+        self.world.teleport(position, yaw)
+
+    def truth_offset(self) -> tuple[float, float] | None:
+        return truth_offset(self.world)
+
+
 @contextmanager
-def open_sim_kit(
-    mission: Mission, limits: SafetyLimits | None = None, models: LoadedModels | None = None
-) -> Iterator[FlightKit]:
-    """World, vehicle, camera, detector and planner for an in-process mission; all closed on exit."""
+def open_sim_world(
+    mission: Mission, limits: SafetyLimits | None = None, with_seg: bool = False
+) -> Iterator[SimWorld]:
+    """World, vehicle and camera for `mission`; all closed on exit. `with_seg`: masked renders (truth)."""
     with ExitStack() as stack:
         camera_config = WorldConfig().camera
         hfov = camera_config.hfov_deg
@@ -61,34 +83,33 @@ def open_sim_kit(
         start = start_offset_for(mission, hfov, vfov)
         world = stack.enter_context(World(world_config_for(mission, start), seed=mission.scene.seed))
         vehicle = SafeVehicle(stack.enter_context(PyBulletVehicle(world)), limits)
-        camera = stack.enter_context(
-            SimCamera(world, with_seg=mission.detector == "truth")
-        )  # seg: occlusion truth
+        camera = stack.enter_context(SimCamera(world, with_seg=with_seg))
+        yield SimWorld(world, vehicle, camera, start)
 
-        def place_at_start() -> None:
-            position, yaw = world.scene.pose_for_offset(
-                start.right_m, start.up_m, start.distance_m, start.yaw_deg
-            )
-            world.teleport(position, yaw)
 
-        def probe() -> tuple[float, float] | None:
-            return truth_offset(world)
-
-        planner = planner_for(mission, models, probe)
+@contextmanager
+def open_sim_kit(
+    mission: Mission, limits: SafetyLimits | None = None, models: LoadedModels | None = None
+) -> Iterator[FlightKit]:
+    """World, vehicle, camera, detector and planner for an in-process mission; all closed on exit."""
+    # seg: the truth detector needs occlusion truth
+    with open_sim_world(mission, limits, with_seg=mission.detector == "truth") as sim:
+        world = sim.world
+        planner = planner_for(mission, models, sim.truth_offset)
         info: dict[str, Any] = {
             "backend": "in-process PyBullet",
             "scene_seed": mission.scene.seed,
             "target_kind": world.scene.target_kind,
-            "start": start.model_dump(),
+            "start": sim.start.model_dump(),
         }
         yield FlightKit(
-            vehicle=vehicle,
-            camera=camera,
-            detector=sim_detector(mission, world, camera, models),
+            vehicle=sim.vehicle,
+            camera=sim.camera,
+            detector=sim_detector(mission, world, sim.camera, models),
             planner=planner,
             instruction=mission.instruction_text(world.scene.target_kind),
-            truth_probe=probe,
-            place_at_start=place_at_start,
+            truth_probe=sim.truth_offset,
+            place_at_start=sim.place_at_start,
             info=info,
-            image_width_px=camera_config.width,
+            image_width_px=world.config.camera.width,
         )
