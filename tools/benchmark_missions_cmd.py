@@ -114,7 +114,23 @@ def main(argv: list[str]) -> int:
     parser.add_argument(
         "--report", type=Path, help="keep each mission's report.json under this folder (new or empty)"
     )
+    parser.add_argument(
+        "--rerun",
+        action="store_true",
+        help="with --report: record each mission for the Rerun viewer as <report>/<mission>/mission.rrd",
+    )
     args = parser.parse_args(argv)
+    if args.rerun:
+        if args.report is None:
+            parser.error("--rerun needs --report (the folder that keeps each mission's recording)")
+        try:
+            import rerun  # noqa: F401
+        except ImportError:
+            print(
+                "dronectl benchmark-missions: --rerun needs the Rerun SDK: pip install -e '.[rerun]'",
+                file=sys.stderr,
+            )
+            return 2
     logging.getLogger().setLevel(logging.WARNING)
     try:
         config = BenchmarkConfig(
@@ -123,6 +139,7 @@ def main(argv: list[str]) -> int:
             checkpoint=args.checkpoint, detector=args.detector, parallel=args.parallel,
             detector_checkpoint=args.detector_checkpoint, scale_moves=not args.fixed_moves,
             px4_dir=args.px4, px4_speed=_speed(args.px4_speed), faults=faults_from_args(args),
+            rerun=args.rerun,
         )  # fmt: skip
         if config.vehicle == "px4-sitl":  # a missing PX4 folder is named before anything flies
             config = replace(config, px4_dir=str(find_px4_dir(config.px4_dir)))

@@ -121,6 +121,12 @@ def main(argv: list[str]) -> int:
         help="report folder; must be new or empty: a report is never written over another "
         "(default: a fresh runs/fly/<mission>-<time>)",
     )
+    parser.add_argument(
+        "--rerun",
+        type=Path,
+        metavar="FILE.rrd",
+        help="also record the flight for the Rerun viewer (a new file; needs the [rerun] extra)",
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="log every module's progress")
     args = parser.parse_args(argv)
     if not args.verbose:
@@ -137,6 +143,14 @@ def main(argv: list[str]) -> int:
     from controller.missions.report import ReportFolderError, claim_report_dir, fresh_report_dir
     from controller.missions.runner import run_mission
 
+    if args.rerun is not None:
+        from controller.missions.rerun_log import RerunFileError, RerunUnavailableError, check_rerun_path
+
+        try:
+            check_rerun_path(args.rerun)
+        except (RerunFileError, RerunUnavailableError) as exc:
+            print(f"dronectl fly: {exc}", file=sys.stderr)
+            return 2
     default_out = Path("runs") / "fly" / f"{mission.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     try:
         out = claim_report_dir(args.out or fresh_report_dir(default_out))
@@ -145,10 +159,12 @@ def main(argv: list[str]) -> int:
         return 2
     print(f"flying {mission.name} ({mission.vehicle}, planner {mission.planner}) ...", flush=True)
     try:
-        result = run_mission(mission, out)
+        result = run_mission(mission, out, rerun_path=args.rerun)
     except Exception as exc:  # could not start: a clear line, not a traceback
         print(f"dronectl fly: {mission.name} could not start: {type(exc).__name__}: {exc}", file=sys.stderr)
         print(f"      report: {out / 'report.json'} (why it did not start)", file=sys.stderr)
         return 1
     print("\n".join(summary_lines(result)))
+    if args.rerun is not None and args.rerun.exists():
+        print(f"      rerun: {args.rerun} (open it with `rerun {args.rerun}`)")
     return 0 if result.passed else 1

@@ -70,6 +70,8 @@ class BenchmarkConfig:
     px4_speed: float | str = "max"
     faults: dict[str, Any] | None = None
     """Injected faults, the `faults:` section of a mission file (seeded per mission by its scene seed)."""
+    rerun: bool = False
+    """Record each mission as `mission.rrd` in its report folder (needs a report folder to keep)."""
 
     def __post_init__(self) -> None:
         if self.n < 1 or self.parallel < 1:
@@ -137,6 +139,9 @@ def _load_models(config: BenchmarkConfig) -> LoadedModels:
     return LoadedModels(detector=detector, latent=latent, latent_checkpoint=config.checkpoint)
 
 
+MISSION_RRD = "mission.rrd"
+"""A mission's Rerun recording in its report folder (`rerun=True`)."""
+
 # Each worker process loads the models once (`_init_worker`, the pool's initializer) and keeps them here.
 _WORKER_MODELS: dict[str, LoadedModels] = {}
 
@@ -148,13 +153,16 @@ def _init_worker(config: BenchmarkConfig) -> None:
     _WORKER_MODELS["models"] = _load_models(config)
 
 
-def _fly(mission: Mission, out_dir: Path, models: LoadedModels | None = None) -> MissionResult:
+def _fly(
+    mission: Mission, out_dir: Path, models: LoadedModels | None = None, rerun: bool = False
+) -> MissionResult:
     from controller.missions.runner import run_mission
 
     models = models or _WORKER_MODELS.get("models")
     start = time.perf_counter()
+    rerun_path = out_dir / MISSION_RRD if rerun else None
     try:
-        return run_mission(mission, out_dir, media=False, models=models)
+        return run_mission(mission, out_dir, media=False, models=models, rerun_path=rerun_path)
     except Exception as exc:
         log.error("benchmark mission %s could not fly: %s", mission.name, exc)
         return failed_to_start(mission, f"{type(exc).__name__}: {exc}", time.perf_counter() - start)
@@ -172,13 +180,13 @@ def run_benchmark(
         if config.parallel == 1:
             models = _load_models(config)
             for mission, path in tqdm(runs, desc="missions", unit="mission"):
-                results.append(_fly(mission, path, models))
+                results.append(_fly(mission, path, models, config.rerun))
         else:
             ctx = get_context("spawn")
             with ProcessPoolExecutor(
                 config.parallel, ctx, initializer=_init_worker, initargs=(config,)
             ) as pool:
-                futures = [pool.submit(_fly, m, p) for m, p in runs]
+                futures = [pool.submit(_fly, m, p, None, config.rerun) for m, p in runs]
                 results = [f.result() for f in tqdm(futures, desc="missions", unit="mission")]
         wall_s = time.perf_counter() - started
         summary = summarise(config, results, wall_s)

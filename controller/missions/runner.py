@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import replace
 from pathlib import Path
@@ -31,7 +31,7 @@ from controller.missions.report import REPORT_JSON, ReportWriter, claim_report_d
 from controller.missions.results import MissionResult, count_steps, judge
 from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission
 from controller.planning.loop import CentringLoop
-from controller.planning.loop_records import CentringConfig, Outcome, count_refinements
+from controller.planning.loop_records import CentringConfig, Outcome, StepRecord, count_refinements
 from core.centring import default_epsilon_px
 from flight.moves import take_off_to_start
 from flight.safe_vehicle import SafeVehicle
@@ -63,8 +63,10 @@ def fly_kit(
     out_dir: str | Path,
     limits: SafetyLimits | None = None,
     media: bool = True,
+    rerun_path: Path | None = None,
 ) -> MissionResult:
-    """Fly the centring loop with `kit` and write the report folder; never loses a recorded step."""
+    """Fly the centring loop with `kit` and write the report folder; never loses a recorded step.
+    `rerun_path`: also record the flight to this new .rrd file (`controller.missions.rerun_log`)."""
     out_dir = Path(out_dir)
     wall_start = time.perf_counter()
     kit = replace(kit, epsilon_px=epsilon_for(mission, kit))  # ε resolved here, once, for every kit
@@ -91,7 +93,12 @@ def fly_kit(
     )
     loop.stop_threshold_px(kit.image_width_px)  # ε against the stopping margin: checked before takeoff
     writer = ReportWriter(out_dir, header, kit.epsilon_px, media=media)
-    loop.on_step = writer.add_step
+    recorder = None
+    if rerun_path is not None:
+        from controller.missions.rerun_log import RerunRecorder
+
+        recorder = RerunRecorder(rerun_path, kit.epsilon_px, header)
+    loop.on_step = writer.add_step if recorder is None else _both(writer.add_step, recorder.add_step)
     outcome, message, error = Outcome.ABORTED, "", None
     vehicle_start_s = vehicle_end_s = 0.0
     clock: dict[str, float] = {}  # milestones on the vehicle's clock (PX4 SITL's: simulated time)
@@ -116,11 +123,23 @@ def fly_kit(
         error = message = f"{type(exc).__name__}: {exc}"
         log.error("mission %s aborted: %s", mission.name, error)
     finally:
+        if recorder is not None:
+            recorder.finish(outcome.value, message)
         mission_result = _finish(
             kit, mission, writer, loop, outcome, message, error, time.perf_counter() - wall_start,
             max(0.0, vehicle_end_s - vehicle_start_s), clock,
         )  # fmt: skip
     return mission_result
+
+
+def _both(
+    first: Callable[[StepRecord], None], second: Callable[[StepRecord], None]
+) -> Callable[[StepRecord], None]:
+    def on_step(step: StepRecord) -> None:
+        first(step)
+        second(step)
+
+    return on_step
 
 
 def _finish(
@@ -216,6 +235,7 @@ def run_mission(
     limits: SafetyLimits | None = None,
     media: bool = True,
     models: LoadedModels | None = None,
+    rerun_path: str | Path | None = None,
 ) -> MissionResult:
     """Build the mission's kit, fly it and write the report folder `out_dir` (`media`: plot and GIF too).
 
@@ -225,8 +245,12 @@ def run_mission(
     """
     out_dir = claim_report_dir(out_dir)
     try:
+        if rerun_path is not None:  # before anything starts: a recording is never overwritten
+            from controller.missions.rerun_log import check_rerun_path
+
+            rerun_path = check_rerun_path(rerun_path)
         with open_kit(mission, out_dir, limits, models) as kit:
-            return fly_kit(kit, mission, out_dir, limits, media)
+            return fly_kit(kit, mission, out_dir, limits, media, rerun_path)
     except BaseException as exc:
         if not (out_dir / REPORT_JSON).exists():  # it failed before the flight's own report began
             write_setup_failure(out_dir, mission, exc)
