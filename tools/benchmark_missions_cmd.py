@@ -21,6 +21,7 @@ from typing import Any
 from controller.missions.benchmark import BenchmarkConfig, format_summary, run_benchmark
 from controller.missions.report import ReportFolderError
 from controller.missions.schema import FaultSpec
+from core.parallel import RayUnavailableError, add_ray_option
 from sim_world.px4_bridge.px4_process import Px4FolderError, find_px4_dir
 
 
@@ -109,7 +110,10 @@ def main(argv: list[str]) -> int:
         "--gust-m-s", type=float, default=0.0, help="wind gusts, standard deviation per axis, m/s"
     )
     faults.add_argument("--vehicle-dies-at-s", type=float, help="the vehicle (or PX4) is killed at this time")
-    parser.add_argument("--parallel", type=int, default=1, help="worker processes (default: 1)")
+    parser.add_argument(
+        "--parallel", type=int, default=1, help="worker processes, or the local Ray's CPUs (default: 1)"
+    )
+    add_ray_option(parser)
     parser.add_argument("--json", type=Path, help="write the summary and every mission's row here")
     parser.add_argument(
         "--report", type=Path, help="keep each mission's report.json under this folder (new or empty)"
@@ -139,7 +143,7 @@ def main(argv: list[str]) -> int:
             checkpoint=args.checkpoint, detector=args.detector, parallel=args.parallel,
             detector_checkpoint=args.detector_checkpoint, scale_moves=not args.fixed_moves,
             px4_dir=args.px4, px4_speed=_speed(args.px4_speed), faults=faults_from_args(args),
-            rerun=args.rerun,
+            rerun=args.rerun, ray=args.ray,
         )  # fmt: skip
         if config.vehicle == "px4-sitl":  # a missing PX4 folder is named before anything flies
             config = replace(config, px4_dir=str(find_px4_dir(config.px4_dir)))
@@ -152,6 +156,9 @@ def main(argv: list[str]) -> int:
         summary = run_benchmark(config, report_dir=args.report)
     except ReportFolderError as exc:
         print(f"dronectl benchmark-missions: --report {exc}", file=sys.stderr)
+        return 2
+    except RayUnavailableError as exc:
+        print(f"dronectl benchmark-missions: {exc}", file=sys.stderr)
         return 2
     print(format_summary(summary))
     if args.json:

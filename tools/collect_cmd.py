@@ -14,6 +14,8 @@ import os
 import sys
 from pathlib import Path
 
+from core.parallel import add_ray_option
+
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
@@ -31,7 +33,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--size", type=int, default=224, help="square image size in pixels (default 224)")
     p.add_argument("--epsilon-px", type=float, default=None, help="ε in pixels (default 10 at 224, scaled)")
     p.add_argument("--images-per-scene", type=int, default=5, help="images per scene (default 5)")
-    p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes (default: all CPUs)")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="processes, or the local Ray's CPUs (default: all CPUs)",
+    )
+    add_ray_option(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
@@ -39,7 +47,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
     from core.dataset import DatasetError
-    from sim_world.collection.collect import CollectConfig, collect
+    from core.parallel import RayUnavailableError
+    from sim_world.collection.collect import CollectConfig, CollectionTaskError, collect
     from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
 
     try:
@@ -62,10 +71,13 @@ def main(argv: list[str]) -> int:
         print(f"dronectl collect: {exc}", file=sys.stderr)
         return 2
     try:
-        result = collect(config, progress=not args.no_progress)
-    except DatasetError as exc:  # e.g. the folder already holds a dataset
+        result = collect(config, progress=not args.no_progress, ray=args.ray)
+    except (DatasetError, RayUnavailableError) as exc:  # e.g. the folder already holds a dataset
         print(f"dronectl collect: {exc}", file=sys.stderr)
         return 2
+    except CollectionTaskError as exc:
+        print(f"dronectl collect: {exc}", file=sys.stderr)
+        return 1
     counts = ", ".join(f"{split} {n}" for split, n in result.counts.items())
     print(f"wrote {sum(result.counts.values())} images ({counts}) to {result.out_dir}")
     print(f"{result.seconds:.1f} s, {result.images_per_s:.1f} images/s")

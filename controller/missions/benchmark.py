@@ -22,9 +22,7 @@ import logging
 import statistics
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
-from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +34,7 @@ from controller.missions.report import REPORT_JSON, claim_report_dir
 from controller.missions.results import MissionResult
 from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission, PortSpec, parse_mission
 from controller.missions.suite import UDP_PORTS_PER_MISSION, failed_to_start
+from core.parallel import gather, task_executor
 from flight.safety import SafetyLimits
 
 log = logging.getLogger(__name__)
@@ -70,6 +69,8 @@ class BenchmarkConfig:
     px4_speed: float | str = "max"
     faults: dict[str, Any] | None = None
     """Injected faults, the `faults:` section of a mission file (seeded per mission by its scene seed)."""
+    ray: str | None = None
+    """Run the missions on Ray: "local" (a private local Ray of `parallel` CPUs) or a cluster's address."""
     rerun: bool = False
     """Record each mission as `mission.rrd` in its report folder (needs a report folder to keep)."""
 
@@ -168,6 +169,14 @@ def _fly(
         return failed_to_start(mission, f"{type(exc).__name__}: {exc}", time.perf_counter() - start)
 
 
+def _as_result(result: MissionResult | BaseException, mission: Mission) -> MissionResult:
+    """A task that failed outside the mission (a worker that crashed, a node that left) counts as a
+    mission that could not fly, named with the reason; the other missions' results stand."""
+    if isinstance(result, MissionResult):
+        return result
+    return failed_to_start(mission, f"task failed: {type(result).__name__}: {result}", 0.0)
+
+
 def run_benchmark(
     config: BenchmarkConfig, skip_seeds: frozenset[int] = frozenset(), report_dir: Path | None = None
 ) -> dict[str, Any]:
@@ -175,19 +184,21 @@ def run_benchmark(
     with tempfile.TemporaryDirectory(prefix="bench-missions-") as tmp:
         out = claim_report_dir(report_dir) if report_dir is not None else Path(tmp)
         runs = [(m, out / m.name) for p in config.planners for m in benchmark_missions(config, p, skip_seeds)]
-        results: list[MissionResult] = []
         started = time.perf_counter()
-        if config.parallel == 1:
-            models = _load_models(config)
-            for mission, path in tqdm(runs, desc="missions", unit="mission"):
-                results.append(_fly(mission, path, models, config.rerun))
-        else:
-            ctx = get_context("spawn")
-            with ProcessPoolExecutor(
-                config.parallel, ctx, initializer=_init_worker, initargs=(config,)
-            ) as pool:
+        with task_executor(config.parallel, config.ray, _init_worker, (config,)) as pool:
+            if pool is None:
+                models = _load_models(config)
+                results = [
+                    _fly(mission, path, models, config.rerun)
+                    for mission, path in tqdm(runs, desc="missions", unit="mission")
+                ]
+            else:
                 futures = [pool.submit(_fly, m, p, None, config.rerun) for m, p in runs]
-                results = [f.result() for f in tqdm(futures, desc="missions", unit="mission")]
+                with tqdm(total=len(futures), desc="missions", unit="mission") as bar:
+                    done = gather(
+                        futures, lambda i: f"{runs[i][0].name} (scene seed {runs[i][0].scene.seed})", bar
+                    )
+                results = [_as_result(r, m) for r, (m, _) in zip(done, runs, strict=True)]
         wall_s = time.perf_counter() - started
         summary = summarise(config, results, wall_s)
         summary["limits"]["reports_incomplete"] = [m.name for m, path in runs if not _report_complete(path)]

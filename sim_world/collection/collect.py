@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import logging
 import math
-import multiprocessing
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,6 +30,7 @@ from core.dataset import (
     write_json_atomic,
 )
 from core.frames import enu_to_ned, yaw_enu_to_ned_rad
+from core.parallel import task_executor
 from sim_world.collection.plan import (
     CollectConfig,
     CollectionPlan,
@@ -207,8 +206,17 @@ def _metadata(
     }
 
 
-def collect(cfg: CollectConfig, progress: bool = True) -> CollectResult:
-    """Run the collection into `cfg.out_dir` (which must not hold a dataset yet)."""
+class CollectionTaskError(RuntimeError):
+    """Some chunks of the collection failed on their workers; the others were written."""
+
+
+def collect(cfg: CollectConfig, progress: bool = True, ray: str | None = None) -> CollectResult:
+    """Run the collection into `cfg.out_dir` (which must not hold a dataset yet).
+
+    `ray` (`core.parallel`): render the chunks of scenes on Ray ("local" or a cluster's address)
+    instead of local processes. A chunk that fails (a crashed worker) is named by its scene seeds
+    after the others have been written; the dataset then holds the others and is marked incomplete.
+    """
     out_dir = Path(cfg.out_dir)
     prepare_output_dir(out_dir)
     plan = plan_collection(cfg)
@@ -218,27 +226,39 @@ def collect(cfg: CollectConfig, progress: bool = True) -> CollectResult:
     jobs = [(cfg, tuple(chunks[i : i + SCENES_PER_JOB])) for i in range(0, len(chunks), SCENES_PER_JOB)]
     workers = min(cfg.workers, len(jobs))
     logger.info(
-        "collecting %d images from %d scenes into %s with %d worker(s)",
+        "collecting %d images from %d scenes into %s with %d worker(s)%s",
         len(plan.images),
         len(chunks),
         out_dir,
         workers,
+        " on Ray" if ray else "",
     )
     start = time.perf_counter()
     complete = False
+    failed: list[str] = []
     bar = tqdm(total=len(plan.images), unit="img", desc="collect", disable=not progress)
-    # spawn, not fork: the caller may hold threads (torch) or a PyBullet client.
-    pool = (
-        ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) if workers > 1 else None
-    )
     try:
-        with ManifestWriter(out_dir) as manifest:
-            results = pool.map(render_scenes, jobs) if pool else map(render_scenes, jobs)
-            for rows in results:
+        with task_executor(workers, ray) as pool, ManifestWriter(out_dir) as manifest:
+            futures = [pool.submit(render_scenes, job) for job in jobs] if pool is not None else None
+            for index, job in enumerate(jobs):
+                try:
+                    rows = futures[index].result() if futures is not None else render_scenes(job)
+                except Exception as exc:
+                    if futures is None:
+                        raise
+                    seeds = sorted({specs[0].scene_seed for specs in job[1]})
+                    failed.append(f"scene seeds {seeds}: {type(exc).__name__}: {exc}")
+                    logger.error("collection chunk with scene seeds %s failed: %s", seeds, exc)
+                    continue
                 manifest.write(rows)
                 for row in rows:
                     counts[row["split"]] += 1
                 bar.update(len(rows))
+        if failed:
+            raise CollectionTaskError(
+                f"{len(failed)} of {len(jobs)} chunks failed; the others are written (marked incomplete): "
+                + "; ".join(failed)
+            )
         complete = True
     except BaseException:
         logger.error(
@@ -251,7 +271,5 @@ def collect(cfg: CollectConfig, progress: bool = True) -> CollectResult:
         raise
     finally:
         bar.close()
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
         write_json_atomic(out_dir / DATASET_JSON, _metadata(cfg, plan, counts, complete=complete))
     return CollectResult(out_dir, counts, time.perf_counter() - start)

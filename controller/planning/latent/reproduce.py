@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import logging
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -19,6 +18,7 @@ from tqdm import tqdm
 
 from controller.planning.latent.config import run_configs
 from controller.planning.latent.experiments import BY_NAME, EXPERIMENT_SETS, Experiment
+from core.parallel import gather, task_executor
 
 log = logging.getLogger(__name__)
 EVAL_FILE = "eval.json"
@@ -75,6 +75,10 @@ def run_job(job: Job) -> dict[str, Any]:
     return summary
 
 
+class ReproduceTaskError(RuntimeError):
+    """Some training runs failed on their workers; the report holds the others."""
+
+
 def reproduce(
     data_dir: Path,
     out_dir: Path,
@@ -85,6 +89,7 @@ def reproduce(
     experiments: str = "all",
     epochs: int | None = None,
     total_threads: int = 2,
+    ray: str | None = None,
 ) -> Path:
     """Run the chosen experiment set over `seeds` seeds and write `out_dir/report.md`."""
     from controller.planning.latent.report import write_report
@@ -100,14 +105,31 @@ def reproduce(
         for name in EXPERIMENT_SETS[experiments]
         for seed in range(seeds)
     ]
-    results: list[dict[str, Any]] = []
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(run_job, job): job for job in jobs}
-        for fut in tqdm(as_completed(futures), total=len(jobs), desc="runs"):
-            job = futures[fut]
-            summary = fut.result()
-            log.info(
-                "%s seed %d: held-out rank-1 %.4f", job.experiment.name, job.seed, summary["heldout"]["rank1"]
-            )
-            results.append(summary)
-    return write_report(results, Path(data_dir), out_dir, preset, seeds)
+    with task_executor(workers, ray) as pool, tqdm(total=len(jobs), desc="runs") as bar:
+        if pool is None:
+            done: list[dict[str, Any] | BaseException] = []
+            for job in jobs:
+                done.append(run_job(job))
+                bar.update(1)
+        else:
+            futures = [pool.submit(run_job, job) for job in jobs]
+            done = gather(futures, lambda i: f"{jobs[i].experiment.name} seed {jobs[i].seed}", bar)
+    results = [r for r in done if not isinstance(r, BaseException)]
+    failed = [f"{job.experiment.name} seed {job.seed}: {type(r).__name__}: {r}"
+              for job, r in zip(jobs, done, strict=True) if isinstance(r, BaseException)]  # fmt: skip
+    for summary in results:
+        log.info(
+            "%s seed %d: held-out rank-1 %.4f",
+            summary["experiment"],
+            summary["seed"],
+            summary["heldout"]["rank1"],
+        )
+    if failed and not results:
+        raise ReproduceTaskError("every run failed: " + "; ".join(failed))
+    report = write_report(results, Path(data_dir), out_dir, preset, seeds)
+    if failed:
+        raise ReproduceTaskError(
+            f"{len(failed)} of {len(jobs)} runs failed (the report holds the others; rerun to finish them, "
+            "finished runs are kept): " + "; ".join(failed)
+        )
+    return report
