@@ -42,6 +42,8 @@ log = logging.getLogger(__name__)
 LOCAL = "local"
 """`--ray` without an address: start a private local Ray for this run."""
 HEAD_READY_TIMEOUT_S = 90.0
+QUIET_RAY_ENV = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_enable_metrics_collection": "0"}
+"""A private head sends no usage statistics and collects no metrics (the agents' CPU is the tasks')."""
 T = TypeVar("T")
 
 
@@ -173,7 +175,9 @@ class RayExecutor(Executor):
         self._init = (initializer, initargs) if initializer is not None else None
         self._refs: list[Any] = []
         try:
-            ray.init(address=address, logging_level=logging.WARNING, log_to_driver=True)
+            # Task failures come back as exceptions; workers' own output stays in Ray's log folder
+            # (streaming it to the driver cost a 2-core machine measurable time).
+            ray.init(address=address, logging_level=logging.WARNING, log_to_driver=False)
         except Exception as exc:
             self._stop_head()
             raise RayUnavailableError(
@@ -196,12 +200,12 @@ class RayExecutor(Executor):
                         ray.cancel(ref, force=True)
             if ray.is_initialized():
                 ray.shutdown()
-        finally:
-            self._stop_head()
+        finally:  # the watchdog stops Ray's processes within seconds: the run need not wait for it
+            self._stop_head(wait=False)
 
-    def _stop_head(self) -> None:
+    def _stop_head(self, wait: bool = True) -> None:
         if self._head is not None:
-            self._head.stop()
+            self._head.stop(wait=wait)
             self._head = None
         for name, value in self._saved_env.items():
             if value is None:
@@ -237,7 +241,7 @@ class LocalRayHead:
             sys.executable, "-m", "core.ray_head", "--parent", str(os.getpid()), "--port", str(self.port),
             "--cpus", str(self.cpus), "--temp-dir", str(self.temp_dir),
         ]  # fmt: skip
-        env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0", **self.auth_env}
+        env = {**os.environ, **QUIET_RAY_ENV, **self.auth_env}
         with self.log_path.open("wb") as log_file:
             self._process = subprocess.Popen(
                 command, stdin=subprocess.DEVNULL, stdout=log_file, stderr=subprocess.STDOUT, env=env,
@@ -261,12 +265,15 @@ class LocalRayHead:
         except OSError:
             return "(no log)"
 
-    def stop(self) -> None:
-        """SIGTERM to the watchdog (it stops Ray's session), SIGKILL if it hangs."""
+    def stop(self, wait: bool = True) -> None:
+        """SIGTERM to the watchdog (it stops Ray's session within seconds); `wait`: until it has, with
+        SIGKILL to its group if it hangs. Not waiting is safe: the watchdog also acts when we are gone."""
         process, self._process = self._process, None
         if process is None or process.poll() is not None:
             return
         process.send_signal(signal.SIGTERM)
+        if not wait:
+            return
         try:
             process.wait(timeout=20)
         except subprocess.TimeoutExpired:
