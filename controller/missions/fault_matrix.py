@@ -42,13 +42,13 @@ DEFAULT_ROWS: tuple[FaultRow, ...] = (
     ),
     FaultRow("camera: 20 % of frames dropped", {"camera": {"drop": 0.2}}, "--frame-drop 0.2"),
     FaultRow(
-        "camera: picture frozen for 3 s at 16 s",
-        {"camera": {"freeze_at_s": 16.0, "freeze_for_s": 3.0}},
-        "--camera-freeze-at-s 16 --camera-freeze-for-s 3",
+        "camera: picture frozen for 3 s at 9 s",
+        {"camera": {"freeze_at_s": 9.0, "freeze_for_s": 3.0}},
+        "--camera-freeze-at-s 9 --camera-freeze-for-s 3",
     ),
-    FaultRow("camera: stream dies at 16 s", {"camera": {"dies_at_s": 16.0}}, "--camera-dies-at-s 16"),
+    FaultRow("camera: stream dies at 9 s", {"camera": {"dies_at_s": 9.0}}, "--camera-dies-at-s 9"),
     FaultRow("wind: gusts of 1.5 m/s (std)", {"gust_m_s": 1.5}, "--gust-m-s 1.5"),
-    FaultRow("vehicle dies at 16 s", {"vehicle_dies_at_s": 16.0}, "--vehicle-dies-at-s 16"),
+    FaultRow("vehicle dies at 9 s", {"vehicle_dies_at_s": 9.0}, "--vehicle-dies-at-s 9"),
 )
 
 
