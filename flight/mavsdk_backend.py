@@ -240,8 +240,8 @@ class MavsdkVehicle(Vehicle):
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise ValueError(f"takeoff altitude must be a positive number of metres, got {altitude_m!r}")
         try:
-            resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m))
-            resend_on_timeout(action.takeoff)
+            resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m), self._cache.link)
+            resend_on_timeout(action.takeoff, self._cache.link)
         except ActionError as exc:
             armed = self.telemetry().armed
             detail = self._last_text() or ("the vehicle is not armed" if not armed else "")
@@ -320,7 +320,7 @@ class MavsdkVehicle(Vehicle):
         self._in_offboard = False
         action = self._require(self._action, "hold()")
         try:
-            resend_on_timeout(action.hold)
+            resend_on_timeout(action.hold, self._cache.link)
         except ActionError as exc:
             raise CommandDeniedError("hold()", exc.result.name, self._last_text()) from None
         self._confirm_mode(FlightMode.HOLD, None, "hold()")
@@ -331,7 +331,7 @@ class MavsdkVehicle(Vehicle):
         if self.telemetry().flight_mode != FlightMode.OFFBOARD:
             return
         try:
-            resend_on_timeout(offboard.stop)
+            resend_on_timeout(offboard.stop, self._cache.link)
         except OffboardError as exc:
             raise CommandDeniedError("stop_offboard()", exc.result.name, self._last_text()) from None
         self._confirm_mode(FlightMode.HOLD, timeout_s, "stop_offboard()")
@@ -342,7 +342,7 @@ class MavsdkVehicle(Vehicle):
             self.stop_offboard()
         self._in_offboard = False
         try:
-            resend_on_timeout(action.land)
+            resend_on_timeout(action.land, self._cache.link)
         except ActionError as exc:
             raise CommandDeniedError("land()", exc.result.name, self._last_text()) from None
         self._wait(lambda t: not t.in_air, timeout_s or self.config.timeouts.land_s, "land()", "landed state")
@@ -352,7 +352,7 @@ class MavsdkVehicle(Vehicle):
         if not self.telemetry().armed:
             return
         try:
-            resend_on_timeout(action.disarm)
+            resend_on_timeout(action.disarm, self._cache.link)
         except ActionError as exc:
             # PX4's auto-disarm may have won the race (its ack lost, or telemetry a heartbeat late):
             # that is success, so give telemetry a moment to say so before calling it a failure.

@@ -61,19 +61,24 @@ class MavsdkConfig:
 COMMAND_ATTEMPTS = 3
 
 
-def resend_on_timeout(call: Callable[[], Any], attempts: int = COMMAND_ATTEMPTS) -> Any:
+def resend_on_timeout(
+    call: Callable[[], Any], link: LinkMonitor | None = None, attempts: int = COMMAND_ATTEMPTS
+) -> Any:
     """Run a MAVSDK command, sending it again when it timed out (every ack lost on a lossy link).
 
     MAVSDK already resends a command four times, 0.5 s apart, before TIMEOUT; on a radio that
     loses a fifth of the packets each way that still fails about once in 170 commands. These
     commands (takeoff, hold, land, disarm, offboard start/stop) are idempotent on PX4, so sending
-    them again is safe. Any other result is raised at once.
+    them again is safe. Any other result is raised at once. With `link`, a last TIMEOUT from a
+    vehicle gone silent is a lost link (`LinkLostError`), not a refusal.
     """
     for attempt in range(1, attempts + 1):
         try:
             return call()
         except (ActionError, OffboardError) as exc:
             if exc.result.name != "TIMEOUT" or attempt == attempts:
+                if exc.result.name == "TIMEOUT" and link is not None:
+                    link.raise_if_lost(str(exc.origin))
                 raise
             log.warning(
                 "%s timed out (no ack): sending it again (%d of %d)", exc.origin, attempt + 1, attempts

@@ -94,3 +94,29 @@ def test_a_command_timeout_on_a_silent_vehicle_is_a_lost_link_and_on_a_live_one_
     live = LinkMonitor(timeout_s=1.0, clock=clock)
     live.heard()
     live.raise_if_lost("start_offboard()", poll_s=0.0)  # heard just now: no verdict to wait for
+
+
+def test_a_command_that_times_out_on_a_silent_vehicle_raises_link_lost_not_a_refusal() -> None:
+    from mavsdk.plugins.action import ActionError, ActionResult
+
+    from flight.mavsdk_link import resend_on_timeout
+
+    def land() -> None:
+        raise ActionError(ActionResult.TIMEOUT, "land()")
+
+    now = [0.0]
+
+    def clock() -> float:
+        now[0] += 0.05
+        return now[0]
+
+    silent = LinkMonitor(timeout_s=1.0, clock=clock)
+    now[0] += 0.6  # the vehicle died: quiet since
+    with pytest.raises(LinkLostError, match=r"land\(\)"):
+        resend_on_timeout(land, silent, attempts=2)
+    live = LinkMonitor(timeout_s=1.0, clock=clock)
+    live.heard()  # a vehicle still talking that does not ack: the TIMEOUT itself, as before
+    with pytest.raises(ActionError):
+        resend_on_timeout(land, live, attempts=2)
+    with pytest.raises(ActionError):  # no link given: as before
+        resend_on_timeout(land, attempts=2)
