@@ -39,7 +39,7 @@ from __future__ import annotations
 import copy
 import string
 from contextlib import ExitStack
-from typing import Any, ClassVar
+from typing import Any, ClassVar, get_args
 
 import numpy as np
 
@@ -52,7 +52,7 @@ except ImportError as exc:  # pragma: no cover - depends on the installed extras
     ) from exc
 
 from controller.missions.kits.sim import SimWorld, open_sim_world
-from controller.missions.schema import Mission, parse_mission
+from controller.missions.schema import Mission, TargetKindName, parse_mission
 from controller.planning.actions import ALL_ACTIONS, Action
 from controller.planning.latent.instructions import CORPORA, builtin_templates, fill
 from controller.planning.loop_records import MoveSchedule
@@ -60,7 +60,7 @@ from core.centring import default_epsilon_px, within
 from flight.moves import fly_offset, take_off_to_start
 
 ENV_ID = "DroneInspect/Centring-v0"
-TARGET_KINDS = ("gauge", "valve", "switchbox")
+TARGET_KINDS = get_args(TargetKindName)
 MOVES = ("fixed", "constant")
 INSTRUCTION_CHARSET = frozenset(string.ascii_letters + string.digits + " .,;:!?'\"-()/&")
 MAX_INSTRUCTION_CHARS = 200

@@ -23,14 +23,13 @@ from pathlib import Path
 from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, link_faults_for
 from controller.missions.kits.simulated import (
     SIM_HFOV_DEG,
-    SIM_IMAGE_PX,
     SimTruth,
     new_system_id,
     simulated_mavlink_kit,
-    video_faults_for,
+    simulated_world_fields,
 )
 from controller.missions.schema import Mission, StartOffset
-from controller.missions.setup import scene_config_for, start_offset_for, wind_config_for
+from controller.missions.setup import start_offset_for
 from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
 from flight.sim_launcher import SimulatorProcess
@@ -39,7 +38,6 @@ from sim_world.px4_bridge.bridge import PX4_CLOCK_OFFSET_US, BridgeTiming
 from sim_world.px4_bridge.px4_process import find_px4_dir, px4_instance
 from sim_world.px4_bridge.run import OFFBOARD_PORT_BASE, READY_PREFIX, Px4SimConfig, config_to_json
 from sim_world.px4_bridge.sensors import SensorNoise
-from sim_world.vehicle.serve import StartPose
 
 log = logging.getLogger(__name__)
 
@@ -62,18 +60,13 @@ def px4_sim_config(mission: Mission, instance: int, out_dir: Path, system_id: in
     return Px4SimConfig(
         px4_dir=find_px4_dir(spec.dir),
         instance=instance,
-        scene=scene_config_for(mission),
-        seed=mission.scene.seed,
-        start_offset=StartPose(start.right_m, start.up_m, start.distance_m, start.yaw_deg),
-        image_size_px=SIM_IMAGE_PX,
+        **simulated_world_fields(mission, start),
         video_port=VIDEO_PORT_BASE + instance,
         timing=BridgeTiming(speed=None if spec.speed == "max" else float(spec.speed)),
         noise=SensorNoise().scaled(spec.noise),
         system_id=system_id,
         params=dict(spec.params),
         px4_log_dir=out_dir / "px4" if spec.keep_ulog else None,
-        wind=wind_config_for(mission),
-        video_faults=video_faults_for(mission),
         px4_dies_at_s=mission.faults.vehicle_dies_at_s,
     )
 

@@ -17,21 +17,20 @@ from pathlib import Path
 from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, link_faults_for
 from controller.missions.kits.simulated import (
     SIM_HFOV_DEG,
-    SIM_IMAGE_PX,
     SimTruth,
     new_system_id,
     simulated_mavlink_kit,
-    video_faults_for,
+    simulated_world_fields,
 )
 from controller.missions.schema import Mission, StartOffset
-from controller.missions.setup import scene_config_for, start_offset_for, wind_config_for
+from controller.missions.setup import start_offset_for
 from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
 from flight.sim_launcher import SimulatorProcess
 from perception.stream_camera import StreamCamera
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.serve import READY_PREFIX as SIM_READY_PREFIX
-from sim_world.vehicle.serve import SimVehicleRun, StartPose, run_to_json
+from sim_world.vehicle.serve import SimVehicleRun, run_to_json
 
 READY_TIMEOUT_S = 60.0
 
@@ -46,15 +45,9 @@ def sim_vehicle_run(mission: Mission, start: StartOffset, system_id: int) -> Sim
         video_port=mission.ports.http,
         video_fps=15.0,
     )
-    offset = StartPose(start.right_m, start.up_m, start.distance_m, start.yaw_deg)
     return SimVehicleRun(
         vehicle=vehicle,
-        scene=scene_config_for(mission),
-        seed=mission.scene.seed,
-        start_offset=offset,
-        image_size_px=SIM_IMAGE_PX,
-        wind=wind_config_for(mission),
-        video_faults=video_faults_for(mission),
+        **simulated_world_fields(mission, start),
         dies_at_s=mission.faults.vehicle_dies_at_s,
     )
 
