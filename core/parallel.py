@@ -253,7 +253,7 @@ class LocalRayHead:
                 raise RayUnavailableError(f"the local Ray head exited: {self._log_tail()}")
             if b"Ray runtime started" in self.log_path.read_bytes():
                 return self
-            time.sleep(0.2)
+            time.sleep(0.05)
         self.stop()
         raise RayUnavailableError(
             f"the local Ray head was not up within {HEAD_READY_TIMEOUT_S:g} s: {self._log_tail()}"
