@@ -87,15 +87,13 @@ def _offset_m(world: World, position_enu: np.ndarray, yaw_enu: float) -> dict[st
     }
 
 
-def _group_half_m(world: World) -> tuple[float, float]:
-    """Half width and half height of a box about the named target's centre holding every target's
-    face (an empty view keeps all of them out); with one target, `_target_half_m`."""
+def _side_reach_m(world: World) -> tuple[float, float] | None:
+    """How far the targets' faces reach west and east of the named target's centre (None: one target)."""
     if len(world.scene.targets) == 1:
-        return _target_half_m(world)
-    centre = np.asarray(world.scene.target_centre_enu_m, dtype=float)
-    corners = np.vstack([np.asarray(t.corners_enu_m, dtype=float) for t in world.scene.targets])
-    reach = np.abs(corners - centre).max(axis=0)
-    return float(reach[0]), float(reach[2])
+        return None
+    centre_east = float(world.scene.target_centre_enu_m[0])
+    east = np.concatenate([np.asarray(t.corners_enu_m, dtype=float)[:, 0] for t in world.scene.targets])
+    return centre_east - float(east.min()), float(east.max()) - centre_east
 
 
 def _place(world: World, cfg: CollectConfig, spec: ImageSpec, rng: np.random.Generator) -> View:
@@ -104,11 +102,11 @@ def _place(world: World, cfg: CollectConfig, spec: ImageSpec, rng: np.random.Gen
     Poses are relative to the named target; an empty view puts every target beside the image.
     """
     half_m = _target_half_m(world)
-    empty_half_m = _group_half_m(world) if spec.split == "empty" else half_m
+    reach_m = _side_reach_m(world)
     target = np.asarray(world.scene.target_centre_enu_m, dtype=float)
     for _ in range(100):
         if spec.split == "empty":
-            view = sample_empty_view(rng, cfg, empty_half_m)
+            view = sample_empty_view(rng, cfg, half_m, reach_m)
         else:
             view = sample_view(spec, rng, cfg, half_m)
         position, yaw = drone_pose_for_view(world.camera, target, view)
