@@ -5,6 +5,12 @@ Written by `sim_world.collection.collect`, read by perception and the controller
 drone pose, scene parameters, split, sector); labels are derived from the offsets
 with `controller.planning.actions.label_from_offset`, so ε can change without re-rendering.
 
+A row's own truth fields are the *named* target's (the one the instruction names and the
+protocol centres). Since scenes may hold several targets, a row also carries
+`target_attribute` (the named target's trim colour name), `named` (its index in `targets`)
+and `targets` (every target's kind, attribute and truth). Datasets written before hold
+none of these and still load; `row_targets(row)` gives the list for either.
+
 Writing is crash-tolerant: `dataset.json` is written (atomically) before the first
 image with `"complete": false` and rewritten at the end; each manifest row is
 flushed as soon as its PNG is on disk, so an interrupted collection leaves a
@@ -23,6 +29,8 @@ from typing import Any, TextIO
 import cv2
 import numpy as np
 
+from core.targets import colour_name
+
 logger = logging.getLogger(__name__)
 
 GENERATOR_VERSION = "sim_world.collect/2"  # a format id (kept when code moves); 2: floor plane not drawn
@@ -33,13 +41,7 @@ IMAGES_DIR = "images"
 SPLITS = ("goal", "train", "test", "empty")
 SECTORS = ("N", "NE", "E", "SE", "S", "SW", "W", "NW", "centre", "none")
 
-_ROW_FIELDS: dict[str, type | tuple[type, ...]] = {
-    "id": str,
-    "image": str,
-    "split": str,
-    "sector": str,
-    "scene_seed": int,
-    "target_kind": str,
+_TRUTH_FIELDS: dict[str, type | tuple[type, ...]] = {
     "centre_px": list,
     "offset_px": list,
     "bbox_px": (list, type(None)),
@@ -47,10 +49,22 @@ _ROW_FIELDS: dict[str, type | tuple[type, ...]] = {
     "fully_in_view": bool,
     "visible_fraction": (int, float),
     "depth_m": (int, float),
+}
+"""Where one target is in the image: the row's own (the named target's) and each `targets` entry's."""
+_ROW_FIELDS: dict[str, type | tuple[type, ...]] = {
+    "id": str,
+    "image": str,
+    "split": str,
+    "sector": str,
+    "scene_seed": int,
+    "target_kind": str,
+    **_TRUTH_FIELDS,
     "drone": dict,
     "offset_m": dict,
     "scene": dict,
 }
+_TARGET_FIELDS: dict[str, type | tuple[type, ...]] = {"kind": str, "attribute": str, **_TRUTH_FIELDS}
+"""Each entry of a row's optional `targets` list."""
 _META_FIELDS = ("generator_version", "seed", "camera", "scene_config", "counts")
 
 
@@ -115,15 +129,60 @@ def prepare_output_dir(out_dir: Path) -> None:
     (out_dir / IMAGES_DIR).mkdir(parents=True, exist_ok=True)
 
 
+def _check_fields(
+    row: dict[str, Any], fields: dict[str, type | tuple[type, ...]], where: str, prefix: str = ""
+) -> None:
+    for name, kind in fields.items():
+        if name not in row:
+            raise DatasetError(f"{where}: missing field {prefix + name!r}")
+        value = row[name]
+        if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
+            raise DatasetError(
+                f"{where}: field {prefix + name!r} has the wrong type ({type(value).__name__})"
+            )
+
+
+def _check_targets(row: dict[str, Any], where: str) -> None:
+    """The optional several-target fields: all three or none, `named` indexing `targets`."""
+    present = [name for name in ("target_attribute", "named", "targets") if name in row]
+    if not present:
+        return  # a dataset written before scenes held several targets
+    if len(present) != 3:
+        missing = sorted({"target_attribute", "named", "targets"} - set(present))
+        raise DatasetError(f"{where}: field {missing[0]!r} missing beside {present}")
+    targets, named = row["targets"], row["named"]
+    if not isinstance(row["target_attribute"], str):
+        raise DatasetError(f"{where}: field 'target_attribute' has the wrong type")
+    if not isinstance(targets, list) or not targets:
+        raise DatasetError(f"{where}: field 'targets' must be a non-empty list")
+    if not isinstance(named, int) or isinstance(named, bool) or not 0 <= named < len(targets):
+        raise DatasetError(
+            f"{where}: field 'named' must index 'targets' (0..{len(targets) - 1}), got {named!r}"
+        )
+    for i, entry in enumerate(targets):
+        if not isinstance(entry, dict):
+            raise DatasetError(f"{where}: field 'targets[{i}]' must be a JSON object")
+        _check_fields(entry, _TARGET_FIELDS, where, prefix=f"targets[{i}].")
+
+
+def row_targets(row: dict[str, Any]) -> list[dict[str, Any]]:
+    """Every target's kind, attribute and truth in a row, the named one at `row.get("named", 0)`.
+
+    A row from before several-target scenes has no `targets`: its one target is built from the
+    row's own fields (the attribute named from the scene's sampled bezel colour, when recorded).
+    """
+    if "targets" in row:
+        return row["targets"]
+    bezel = row.get("scene", {}).get("target", {}).get("bezel_colour")
+    attribute = colour_name(bezel) if isinstance(bezel, str) else None
+    return [{"kind": row["target_kind"], "attribute": attribute, **{k: row[k] for k in _TRUTH_FIELDS}}]
+
+
 def _check_row(row: object, where: str) -> dict[str, Any]:
     if not isinstance(row, dict):
         raise DatasetError(f"{where}: expected a JSON object, got {type(row).__name__}")
-    for name, kind in _ROW_FIELDS.items():
-        if name not in row:
-            raise DatasetError(f"{where}: missing field {name!r}")
-        value = row[name]
-        if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
-            raise DatasetError(f"{where}: field {name!r} has the wrong type ({type(value).__name__})")
+    _check_fields(row, _ROW_FIELDS, where)
+    _check_targets(row, where)
     if row["split"] not in SPLITS:
         raise DatasetError(f"{where}: field 'split' is {row['split']!r}, expected one of {SPLITS}")
     if row["sector"] not in SECTORS:

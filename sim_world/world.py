@@ -26,7 +26,7 @@ from sim_world.physics.autopilot import Autopilot, AutopilotParams
 from sim_world.physics.quadrotor import GRAVITY_M_S2, Quadrotor, QuadrotorParams, RigidBodyState
 from sim_world.physics.wind import Wind, WindConfig
 from sim_world.rendering.camera import CameraConfig, ForwardCamera, Render
-from sim_world.scene.builder import Scene
+from sim_world.scene.builder import Scene, SceneTarget
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfig
 from sim_world.scene.target_truth import TargetTruth, target_truth
 
@@ -149,13 +149,20 @@ class World:
         )
 
     def target_truth(self, render: Render | None = None) -> TargetTruth:
-        """Where the target is in the image, from geometry (plus its pixel count given a masked render)."""
+        """Where the named target is in the image, from geometry (and its pixel count, given a render)."""
+        return self._truth(self.scene.targets[self.scene.named_index], render)
+
+    def targets_truth(self, render: Render | None = None) -> list[TargetTruth]:
+        """Every target's truth, in the order of `scene.targets` (the named one first)."""
+        return [self._truth(target, render) for target in self.scene.targets]
+
+    def _truth(self, target: SceneTarget, render: Render | None) -> TargetTruth:
         return target_truth(
             self.camera,
             self.drone.state(),
-            centre_enu_m=np.asarray(self.scene.target_centre_enu_m, dtype=float),
-            outline_enu_m=np.asarray(self.scene.target_corners_enu_m, dtype=float),
-            target_body_id=self.scene.target_body_id,
+            centre_enu_m=np.asarray(target.centre_enu_m, dtype=float),
+            outline_enu_m=np.asarray(target.corners_enu_m, dtype=float),
+            target_body_id=target.body_id,
             render=render,
         )
 

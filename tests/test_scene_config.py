@@ -48,6 +48,16 @@ def test_a_partial_file_overrides_only_what_it_names(tmp_path: Path) -> None:
         ("lighting:\n  ambient: [0.2, 1.5]\n", "lighting.ambient", "within [0, 1]"),
         ("lighting:\n  shadow: sometimes\n", "lighting.shadow", "valid boolean"),
         ("camera_noise_std: [3, 1]\n", "camera_noise_std", "min 3 > max 1"),
+        ("target:\n  count: [0, 2]\n", "target.count", "within [1, 4]"),
+        ("target:\n  count: [2, 5]\n", "target.count", "within [1, 4]"),
+        ("target:\n  count: two\n", "target.count", "expected a list"),
+        (
+            "target:\n  count: [3, 3]\n  other_kinds: [gauge]\n  bezel_colours: ['#c0392b']\n",
+            "target.count",
+            "must differ in kind or bezel colour name",
+        ),
+        ("target:\n  count: [2, 2]\n  twins: true\n  bezel_colours: ['#c0392b']\n", "target.count", "twins"),
+        ("target:\n  other_kinds: [dial]\n", "target.other_kinds[0]", "'gauge', 'valve' or 'switchbox'"),
     ],
 )
 def test_invalid_field_is_named(tmp_path: Path, text: str, field: str, reason: str) -> None:

@@ -2,6 +2,10 @@
 
     dronectl collect --out data/sim --seed 0
     dronectl collect --out data/small --seed 1 --n-goal 40 --n-per-sector 60 --n-test 120 --size 128
+    dronectl collect --out data/multi --seed 2 --targets 2-4 --twins
+
+With --targets, scenes hold several targets; the protocol (goal images, eight sectors,
+test, empty) is taken relative to the named one, and every row lists all targets' truth.
 
 Writes DIR/images/*.png, DIR/manifest.jsonl (truth per image) and DIR/dataset.json
 (camera, scene config, seeds); see docs/architecture.md.
@@ -17,6 +21,18 @@ from pathlib import Path
 from core.parallel import add_ray_option
 
 
+def target_count(text: str) -> tuple[int, int]:
+    """`--targets`: a count `N` or a range `LO-HI` (checked against the scene config's limits later)."""
+    parts = text.split("-")
+    try:
+        numbers = [int(part) for part in parts]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected N or LO-HI, got {text!r}") from None
+    if len(numbers) not in (1, 2):
+        raise argparse.ArgumentTypeError(f"expected N or LO-HI, got {text!r}")
+    return numbers[0], numbers[-1]
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="dronectl collect", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -26,6 +42,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=int, required=True, help="seed of the whole dataset (scenes, poses, noise)")
     p.add_argument("--scene", type=Path, default=None, help="scene config YAML (default: built-in scenes)")
+    p.add_argument(
+        "--targets",
+        type=target_count,
+        default=None,
+        metavar="N|LO-HI",
+        help="targets per scene, 1..4, a number or a range (default: the scene config's target.count)",
+    )
+    p.add_argument(
+        "--twins",
+        action="store_true",
+        help="one other target shares the named target's kind, in another trim colour (needs --targets >= 2)",
+    )
     p.add_argument("--n-goal", type=int, default=100, help="goal images, target centred (default 100)")
     p.add_argument("--n-per-sector", type=int, default=200, help="images in each of 8 sectors (default 200)")
     p.add_argument("--n-test", type=int, default=400, help="test images, unseen scenes (default 400)")
@@ -49,10 +77,14 @@ def main(argv: list[str]) -> int:
     from core.dataset import DatasetError
     from core.parallel import RayUnavailableError
     from sim_world.collection.collect import CollectConfig, CollectionTaskError, collect
-    from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
+    from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config, with_targets
 
     try:
         scene = load_scene_config(args.scene) if args.scene else DEFAULT_SCENE
+        if args.targets is not None or args.twins:
+            scene = with_targets(scene, count=args.targets, twins=True if args.twins else None)
+        if args.twins and scene.target.count[1] < 2:
+            raise ValueError("--twins needs scenes of 2 or more targets (--targets 2 or more)")
         config = CollectConfig(
             out_dir=args.out,
             seed=args.seed,

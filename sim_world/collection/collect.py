@@ -43,6 +43,7 @@ from sim_world.collection.plan import (
     sector_of_offset,
 )
 from sim_world.rendering.camera import ForwardCamera
+from sim_world.scene.target_truth import TargetTruth
 from sim_world.world import World, WorldConfig
 
 __all__ = ["CollectConfig", "CollectResult", "collect", "load_manifest", "render_scenes"]
@@ -86,13 +87,26 @@ def _offset_m(world: World, position_enu: np.ndarray, yaw_enu: float) -> dict[st
     }
 
 
+def _side_reach_m(world: World) -> tuple[float, float] | None:
+    """How far the targets' faces reach west and east of the named target's centre (None: one target)."""
+    if len(world.scene.targets) == 1:
+        return None
+    centre_east = float(world.scene.target_centre_enu_m[0])
+    east = np.concatenate([np.asarray(t.corners_enu_m, dtype=float)[:, 0] for t in world.scene.targets])
+    return centre_east - float(east.min()), float(east.max()) - centre_east
+
+
 def _place(world: World, cfg: CollectConfig, spec: ImageSpec, rng: np.random.Generator) -> View:
-    """Teleport the drone to a sampled pose for this image (redrawing poses the altitude limits refuse)."""
+    """Teleport the drone to a sampled pose for this image (redrawing poses the altitude limits refuse).
+
+    Poses are relative to the named target; an empty view puts every target beside the image.
+    """
     half_m = _target_half_m(world)
+    reach_m = _side_reach_m(world)
     target = np.asarray(world.scene.target_centre_enu_m, dtype=float)
     for _ in range(100):
         if spec.split == "empty":
-            view = sample_empty_view(rng, cfg, half_m)
+            view = sample_empty_view(rng, cfg, half_m, reach_m)
         else:
             view = sample_view(spec, rng, cfg, half_m)
         position, yaw = drone_pose_for_view(world.camera, target, view)
@@ -104,19 +118,37 @@ def _place(world: World, cfg: CollectConfig, spec: ImageSpec, rng: np.random.Gen
     )
 
 
+def _truth_fields(truth: TargetTruth) -> dict[str, Any]:
+    """A target's truth as manifest fields (the named one's in the row itself; every `targets` entry)."""
+    du, dv = truth.offset_px
+    return {
+        "centre_px": [round(truth.centre_px[0], 3), round(truth.centre_px[1], 3)],
+        "offset_px": [round(du, 3), round(dv, 3)],
+        "bbox_px": None if truth.bbox_px is None else [round(x, 3) for x in truth.bbox_px],
+        "in_view": truth.in_view,
+        "fully_in_view": truth.fully_in_view,
+        "visible_fraction": round(truth.visible_fraction, 4),
+        "depth_m": round(truth.depth_m, 4),
+    }
+
+
 def _render_one(
     world: World, cfg: CollectConfig, spec: ImageSpec, scene_params: dict[str, Any]
 ) -> dict[str, Any]:
     rng = np.random.default_rng([cfg.seed, spec.index])
     noise_rng = np.random.default_rng([cfg.seed, spec.index, 1])
+    scene = world.scene
     for _ in range(_EMPTY_TRIES):
         _place(world, cfg, spec, rng)
         render = world.render(with_seg=True, rng=noise_rng)
-        truth = world.target_truth(render)
-        if spec.split != "empty" or (truth.bbox_px is None and truth.mask_px == 0):
+        truths = world.targets_truth(render)
+        if spec.split != "empty" or all(t.bbox_px is None and t.mask_px == 0 for t in truths):
             break
     else:
-        raise RuntimeError(f"{spec.image_id}: could not find a view without the target")
+        raise RuntimeError(
+            f"{spec.image_id}: no view without any of the {len(truths)} target(s) in {_EMPTY_TRIES} tries"
+        )
+    truth = truths[scene.named_index]
     du, dv = truth.offset_px
     if spec.split != "empty" and sector_of_offset(du, dv, cfg.epsilon) != spec.sector:
         raise RuntimeError(  # an internal error: the pose solver and the truth disagree
@@ -134,19 +166,19 @@ def _render_one(
         "split": spec.split,
         "sector": spec.sector,
         "scene_seed": spec.scene_seed,
-        "target_kind": world.scene.target_kind,
-        "centre_px": [round(truth.centre_px[0], 3), round(truth.centre_px[1], 3)],
-        "offset_px": [round(du, 3), round(dv, 3)],
-        "bbox_px": None if truth.bbox_px is None else [round(x, 3) for x in truth.bbox_px],
-        "in_view": truth.in_view,
-        "fully_in_view": truth.fully_in_view,
-        "visible_fraction": round(truth.visible_fraction, 4),
-        "depth_m": round(truth.depth_m, 4),
+        "target_kind": scene.target_kind,
+        "target_attribute": scene.target_attribute,
+        **_truth_fields(truth),
         "drone": {
             "position_ned_m": [round(float(x), 4) for x in enu_to_ned(state.position_enu_m)],
             "yaw_deg": round(math.degrees(yaw_enu_to_ned_rad(yaw_enu)), 4),
         },
         "offset_m": _offset_m(world, state.position_enu_m, yaw_enu),
+        "named": scene.named_index,
+        "targets": [
+            {"kind": target.kind, "attribute": target.attribute, **_truth_fields(t)}
+            for target, t in zip(scene.targets, truths, strict=True)
+        ],
         "scene": scene_params,
     }
 
@@ -196,6 +228,9 @@ def _metadata(
             "yaw_deg": [-cfg.yaw_deg, cfg.yaw_deg],
             "edge_fraction": cfg.edge_fraction,
             "altitude_m": list(cfg.altitude_m),
+            "targets": list(cfg.scene.target.count),
+            "twins": cfg.scene.target.twins,
+            "relative_to": "the named target (row field 'named', an index into 'targets')",
         },
         "scene_file": cfg.scene_file,
         "scene_config": cfg.scene.model_dump(mode="json"),

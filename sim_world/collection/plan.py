@@ -234,13 +234,24 @@ def sample_view(
 
 
 def sample_empty_view(
-    rng: np.random.Generator, cfg: CollectConfig, target_half_m: tuple[float, float]
+    rng: np.random.Generator,
+    cfg: CollectConfig,
+    target_half_m: tuple[float, float],
+    side_reach_m: tuple[float, float] | None = None,
 ) -> View:
-    """A placement with the target beside the image (left or right), so the camera sees only the wall."""
+    """A placement with the target beside the image (left or right), so the camera sees only the wall.
+
+    `side_reach_m` = (west, east): how far the faces of all targets reach from the named target's
+    centre, in a scene of several; the named target then stands beside the image far enough that
+    the ones on the camera's side are out of it too. None: one target, `max(target_half_m)` each way.
+    """
     fx = Intrinsics.from_config(cfg.camera).fx
     half = cfg.size_px / 2.0
     depth = float(rng.uniform(*cfg.distance_m))
-    outside = half + fx * max(target_half_m) / depth + 8.0
-    du = float(rng.choice([-1.0, 1.0])) * float(rng.uniform(outside, outside + half))
+    side = float(rng.choice([-1.0, 1.0]))
+    # The target right of the image (side > 0) puts the camera west of it: the west reach counts.
+    reach = max(target_half_m) if side_reach_m is None else side_reach_m[0 if side > 0 else 1]
+    outside = half + fx * reach / depth + 8.0
+    du = side * float(rng.uniform(outside, outside + half))
     dv = float(rng.uniform(-half / 2.0, half / 2.0))
     return View(du, dv, depth, float(rng.uniform(-cfg.yaw_deg, cfg.yaw_deg)))

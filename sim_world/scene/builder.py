@@ -1,4 +1,4 @@
-"""The inspection scene: a wall with pipes and clutter, a floor, and the target to centre.
+"""The inspection scene: a wall with pipes and clutter, a floor, and the targets (one named, to centre).
 
 `Scene.build(client_id, config, seed)` draws one scene from the config's ranges
 (`scene_sampling`), creates its bodies in the given PyBullet client (`scene_objects`)
@@ -22,16 +22,46 @@ import numpy as np
 import pybullet as p
 
 from core.frames import wrap_rad
+from core.targets import colour_name
 from sim_world.rendering.camera import Lighting
 from sim_world.scene.assets import AssetCache
 from sim_world.scene.bodies import BodyBuilder
 from sim_world.scene.config import SceneConfig
-from sim_world.scene.objects import build_floor, build_item, build_target, build_wall
-from sim_world.scene.sampling import SceneParams, sample_scene
+from sim_world.scene.objects import BuiltTarget, build_floor, build_item, build_target, build_wall
+from sim_world.scene.sampling import SceneParams, TargetParams, sample_scene
 
 logger = logging.getLogger(__name__)
 
 LIGHT_DISTANCE_M = 10.0
+
+
+@dataclass(frozen=True, eq=False)
+class SceneTarget:
+    """One inspection target as built: what an instruction calls it and where it is."""
+
+    kind: str
+    """"gauge", "valve" or "switchbox" (`core.targets.TARGET_KINDS`)."""
+    attribute: str
+    """The trim colour's name (`core.targets.colour_name` of its bezel colour): "red", "blue", ..."""
+    body_id: int
+    """The face only (dial + bezel, handwheel, door): what the segmentation mask counts."""
+    centre_enu_m: np.ndarray
+    """(3,) centre of the front face."""
+    corners_enu_m: np.ndarray
+    """(N, 3) ordered loop around the front face."""
+    size_m: float
+    """Diameter (gauge, valve) or width (switch box) of the front face."""
+
+    @classmethod
+    def of(cls, params: TargetParams, built: BuiltTarget) -> SceneTarget:
+        return cls(
+            kind=params.kind,
+            attribute=colour_name(params.bezel_colour),
+            body_id=built.body_id,
+            centre_enu_m=built.centre_enu_m,
+            corners_enu_m=built.outline_enu_m,
+            size_m=params.size_m,
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,6 +91,18 @@ class Scene:
     distractor_body_ids: tuple[int, ...]
     other_body_ids: tuple[int, ...]
     """The floor's collision plane."""
+    targets: tuple[SceneTarget, ...]
+    """Every target on the wall, the named one (the `target_*` fields) first."""
+
+    @property
+    def named_index(self) -> int:
+        """Where the named target (the one to centre) is in `targets`."""
+        return 0
+
+    @property
+    def target_attribute(self) -> str:
+        """The named target's trim colour name ("red", "blue", ...)."""
+        return self.targets[self.named_index].attribute
 
     @classmethod
     def build(cls, client_id: int, config: SceneConfig, seed: int, asset_dir: Path | None = None) -> Scene:
@@ -77,6 +119,7 @@ class Scene:
         wall_id = build_wall(builder, assets, params, north, wall.width_m, wall.height_m)
         floor_id, floor_collider_id = build_floor(builder, assets, params, north)
         target = build_target(builder, assets, params.target, north)
+        others = tuple(build_target(builder, assets, t, north) for t in params.others)
         mounts = tuple(build_item(builder, assets, item, north) for item in params.mounts)
         clutter = tuple(build_item(builder, assets, item, north) for item in params.clutter)
         distractors = tuple(build_item(builder, assets, item, north) for item in params.distractors)
@@ -91,11 +134,12 @@ class Scene:
             shadow=light.shadow,
         )
         logger.debug(
-            "scene %d: %s at (%.2f, %.2f), %d clutter, %d distractors",
+            "scene %d: %s at (%.2f, %.2f) and %d other target(s), %d clutter, %d distractors",
             seed,
             params.target.kind,
             params.target.east_m,
             params.target.height_m,
+            len(others),
             len(clutter),
             len(distractors),
         )
@@ -112,10 +156,13 @@ class Scene:
             camera_noise_std=params.camera_noise_std,
             wall_body_id=wall_id,
             floor_body_id=floor_id,
-            mount_body_ids=(*target.mount_body_ids, *mounts),
+            mount_body_ids=(*target.mount_body_ids, *(m for o in others for m in o.mount_body_ids), *mounts),
             clutter_body_ids=clutter,
             distractor_body_ids=distractors,
             other_body_ids=(floor_collider_id,),
+            targets=tuple(
+                SceneTarget.of(t, b) for t, b in zip(params.targets, (target, *others), strict=True)
+            ),
         )
 
     def params(self) -> dict:
@@ -125,7 +172,7 @@ class Scene:
     def pose_for_offset(
         self, right_m: float, up_m: float, distance_m: float, yaw_deg: float
     ) -> tuple[np.ndarray, float]:
-        """A drone pose relative to the centred pose in front of the target.
+        """A drone pose relative to the centred pose in front of the (named) target.
 
         Position: `distance_m` in front of the target's face along the wall normal
         (south), shifted `right_m` east and `up_m` up. Heading: facing the wall (ENU yaw
@@ -141,7 +188,7 @@ class Scene:
         return (
             self.wall_body_id,
             self.floor_body_id,
-            self.target_body_id,
+            *(t.body_id for t in self.targets),
             *self.mount_body_ids,
             *self.clutter_body_ids,
             *self.distractor_body_ids,

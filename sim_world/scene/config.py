@@ -13,8 +13,9 @@ import re
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import AfterValidator, Field, field_validator
+from pydantic import AfterValidator, Field, ValidationInfo, field_validator
 
+from core import targets as vocabulary
 from core.config_files import ConfigFileError, StrictModel, check_range, read_yaml, validate_mapping
 
 TargetKind = Literal["gauge", "valve", "switchbox"]
@@ -23,6 +24,9 @@ FloorTexture = Literal["concrete", "tiles", "grating"]
 DistractorKind = Literal["dial", "box", "sign"]
 
 TARGET_KINDS: tuple[TargetKind, ...] = ("gauge", "valve", "switchbox")
+assert TARGET_KINDS == vocabulary.TARGET_KINDS, "the scene's target kinds are core.targets' vocabulary"
+MAX_TARGETS = 4
+"""The most targets one scene holds (all of them in view from the named target's centred pose)."""
 
 _HEX_COLOUR = re.compile(r"^#[0-9a-fA-F]{6}$")
 
@@ -58,9 +62,15 @@ def hex_to_rgb(colour: str) -> tuple[int, int, int]:
 
 
 class TargetConfig(StrictModel):
-    """The inspection target: which kind, how big, where on the wall, in which colours."""
+    """The inspection targets: how many, which kinds, how big, where on the wall, in which colours.
+
+    The first target is the *named* one (what an instruction asks to centre); the others
+    stand beside it. Targets of one kind always differ in their trim colour's name
+    (`core.targets.colour_name` of `bezel_colours`), the attribute an instruction names.
+    """
 
     kinds: tuple[TargetKind, ...] = Field(default=TARGET_KINDS, min_length=1)
+    """Choices for the named target's kind."""
     size_m: Range = (0.26, 0.40)
     """Gauge and handwheel diameter, switch-box width."""
     height_m: Range = (1.1, 1.9)
@@ -77,11 +87,38 @@ class TargetConfig(StrictModel):
     """Gauge bezel ring / case, handwheel hub and switch-box door frame colours."""
     needle_fraction: Range = (0.1, 0.9)
     """Gauge reading as a fraction of full scale."""
+    other_kinds: tuple[TargetKind, ...] = Field(default=TARGET_KINDS, min_length=1)
+    """Choices for the other targets' kinds (kinds not yet on the wall are preferred)."""
+    twins: bool = False
+    """With 2 or more targets: one other target has the named target's kind, in another trim colour."""
+    count: IntRange = (1, 1)
+    """How many targets on the wall (named one included), 1..4. Last, so that its check sees the rest."""
 
-    @field_validator("kinds", mode="before")
+    @field_validator("kinds", "other_kinds", mode="before")
     @classmethod
     def _one_kind_is_a_list(cls, value: object) -> object:
         return (value,) if isinstance(value, str) else value
+
+    @field_validator("count")
+    @classmethod
+    def _target_count(cls, value: tuple[int, int], info: ValidationInfo) -> tuple[int, int]:
+        """1..4, and enough (kind, trim colour name) pairs to tell that many targets apart."""
+        _within(value, 1, MAX_TARGETS)
+        if not {"kinds", "other_kinds", "twins", "bezel_colours"} <= info.data.keys():
+            return value  # another field is already refused
+        names = len({vocabulary.colour_name(c) for c in info.data["bezel_colours"]})
+        twins = info.data["twins"]
+        if twins and value[1] >= 2 and names < 2:
+            raise ValueError("twins need at least 2 bezel_colours with different colour names")
+        for kind in info.data["kinds"]:
+            others = set(info.data["other_kinds"]) | ({kind} if twins else set())
+            pairs = len(others) * names - (1 if kind in others else 0)
+            if pairs < value[1] - 1:
+                raise ValueError(
+                    f"up to {value[1]} targets must differ in kind or bezel colour name, but a named "
+                    f"{kind} leaves {pairs} other (kind, colour) pair(s) in other_kinds and bezel_colours"
+                )
+        return value
 
     @field_validator("size_m")
     @classmethod
@@ -189,6 +226,18 @@ DEFAULT_SCENE = SceneConfig()
 def parse_scene_config(data: object, source: str | Path = "<scene config>") -> SceneConfig:
     """Validate an already-parsed mapping (empty means the defaults); errors name `source` and the field."""
     return validate_mapping(SceneConfig, {} if data is None else data, source, SceneConfigError)
+
+
+def with_targets(
+    config: SceneConfig, count: tuple[int, int] | None = None, twins: bool | None = None
+) -> SceneConfig:
+    """`config` with `target.count` and/or `target.twins` replaced, validated as a file would be."""
+    data = config.model_dump(mode="json")
+    if count is not None:
+        data["target"]["count"] = list(count)
+    if twins is not None:
+        data["target"]["twins"] = twins
+    return parse_scene_config(data, "<command line>")
 
 
 def load_scene_config(path: str | Path) -> SceneConfig:

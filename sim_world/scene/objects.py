@@ -39,6 +39,8 @@ OUTLINE_POINTS = 24
 FLOOR_SIZE_M = 30.0
 _FACE_GAP_M = 0.0015
 """A textured face floats this far in front of the part behind it (no depth fighting)."""
+_SHORT_PIPE_M = 2.0
+"""Pipes shorter than this (local mounts) keep their flanges and clamps on them; longer ones span the wall."""
 
 
 @dataclass(frozen=True)
@@ -253,11 +255,14 @@ def _pipe(builder: BodyBuilder, item: WallItem, north: float, horizontal: bool, 
     parts = [Part("cylinder", (radius, length), (0.0, 0.0, 0.0), item.colour, axis)]
     if not conduit:
         rng = np.random.default_rng(item.variant)
-        for offset in rng.uniform(-2.0, 2.0, size=2):
+        # Flanges within 2 m of the middle; on a short pipe (a local mount) within its length.
+        reach = 1.0 if length >= _SHORT_PIPE_M else max(0.0, length / 2 - 0.1) / 2.0
+        for offset in reach * rng.uniform(-2.0, 2.0, size=2):
             along = (float(offset), 0.0, 0.0) if horizontal else (0.0, 0.0, float(offset))
             parts.append(Part("cylinder", (1.4 * radius, 0.05), along, shaded(item.colour, 0.8), axis))
             to_wall = item.standoff_m - radius  # from the pipe's axis back to the wall
-            shift = (0.15, 0.0, 0.0) if horizontal else (0.0, 0.0, 0.15)
+            step = 0.15 if length >= _SHORT_PIPE_M or offset < 0 else -0.15  # a clamp towards the middle
+            shift = (step, 0.0, 0.0) if horizontal else (0.0, 0.0, step)
             clamp = (along[0] + shift[0], to_wall / 2, along[2] + shift[2])
             parts.append(Part("box", (0.02, to_wall / 2, 0.02), clamp, "#3c3f42"))
     y = north - item.standoff_m + radius
