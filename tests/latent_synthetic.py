@@ -16,6 +16,8 @@ import cv2
 import numpy as np
 
 KINDS = ("gauge", "valve", "switchbox")
+ATTRIBUTES = {"gauge": "black", "valve": "red", "switchbox": "grey"}
+"""The trim colour each synthetic kind is drawn in."""
 
 
 def _background(rng: np.random.Generator, size: int) -> np.ndarray:
@@ -45,6 +47,21 @@ def _draw_target(img: np.ndarray, kind: str, centre: tuple[float, float], radius
         )
 
 
+def _listed(kind: str, du: float, dv: float, size: int, radius: int) -> dict:
+    u, v = size / 2 + du, size / 2 + dv
+    return {
+        "kind": kind,
+        "attribute": ATTRIBUTES[kind],
+        "centre_px": [u, v],
+        "offset_px": [du, dv],
+        "bbox_px": [u - radius, v - radius, u + radius, v + radius],
+        "in_view": True,
+        "fully_in_view": True,
+        "visible_fraction": 1.0,
+        "depth_m": 2.0,
+    }
+
+
 def _sector(du: float, dv: float, eps: float) -> str:
     ns = "N" if dv < -eps else "S" if dv > eps else ""
     ew = "E" if du > eps else "W" if du < -eps else ""
@@ -59,11 +76,14 @@ def write_synthetic_dataset(
     n_test: int = 80,
     size: int = 64,
     seed: int = 0,
+    targets: int = 1,
 ) -> Path:
     """Write a synthetic fixture dataset to `root` and return `root`.
 
     Offsets of train/test targets are uniform over the central 60 % of the image; goal
-    targets sit within ε/2 of the centre (ε = 10 px at 224, scaled to `size`).
+    targets sit within ε/2 of the centre (ε = 10 px at 224, scaled to `size`). With
+    `targets` > 1 each image also holds other targets of other kinds anywhere in the central
+    60 % (not overlapping the named one), listed in the row's `targets` after the named one.
     """
     rng = np.random.default_rng(seed)
     root = Path(root)
@@ -80,6 +100,18 @@ def write_synthetic_dataset(
             centre = (size / 2 + du, size / 2 + dv)
             img = _background(rng, size)
             _draw_target(img, kind, centre, radius)
+            listed = [_listed(kind, du, dv, size, radius)]
+            others = [k for k in KINDS if k != kind]
+            for other in others[: targets - 1]:
+                for _ in range(100):
+                    odu, odv = (float(v) for v in rng.uniform(-reach, reach, size=2))
+                    if all(
+                        abs(odu - t["offset_px"][0]) + abs(odv - t["offset_px"][1]) > 3 * radius
+                        for t in listed
+                    ):
+                        break
+                _draw_target(img, other, (size / 2 + odu, size / 2 + odv), radius)
+                listed.append(_listed(other, odu, odv, size, radius))
             name = f"{split}_{i:06d}"
             cv2.imwrite(str(root / "images" / f"{name}.png"), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
             rows.append(
@@ -105,6 +137,9 @@ def write_synthetic_dataset(
                     "drone": {"position_ned_m": [0.0, 0.0, -1.5], "yaw_deg": 0.0},
                     "offset_m": {"right_m": 0.0, "up_m": 0.0, "distance_m": 2.0, "yaw_deg": 0.0},
                     "scene": {"synthetic": True},
+                    "target_attribute": ATTRIBUTES[kind],
+                    "named": 0,
+                    "targets": listed,
                 }
             )
     meta = {

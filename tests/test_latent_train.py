@@ -62,3 +62,47 @@ def test_train_command_help_renders_and_cpu_is_the_default_preset() -> None:
     parser = build_parser()
     assert "label-exact" in parser.format_help()  # the preset notes hold '%', argparse must not choke
     assert parser.parse_args(["--data", "d", "--out", "o"]).preset == "cpu"
+
+
+def test_grounded_training_plans_toward_the_target_the_words_name(tmp_path: Path) -> None:
+    """Two targets per image: asked for the named one, the model's moves follow the named one's offset,
+    not the other's, so it must read the words (a model that ignores them scores ~half of this)."""
+    from dataclasses import replace
+
+    from controller.planning.latent.checkpoint import load_checkpoint
+    from controller.planning.latent.config import PRESETS
+    from controller.planning.latent.evaluate import evaluate_loaded
+
+    one = write_synthetic_dataset(tmp_path / "one", n_goal=40, n_train=400, n_test=40, size=64, seed=1)
+    data = write_synthetic_dataset(tmp_path / "two", n_goal=40, n_train=400, n_test=120, size=64, targets=2)
+    preset = PRESETS["grounded"]
+    model_cfg = replace(preset.model, image_size=64, base_width=8)
+    cfg = replace(preset.train, epochs=30, learning_rate=2e-3, threads=2)
+    # Single-target images teach where a target is; two-target images, which one the words mean.
+    train([one, data], tmp_path / "run", model_cfg, cfg, progress=False)
+    ckpt = load_checkpoint(tmp_path / "run")
+    assert ckpt.model.presence is not None and ckpt.model.conditioned
+
+    index = load_index(data)
+    test = load_images(index.split("test"), 64, index.default_epsilon_px())
+    named = evaluate_loaded(ckpt, test, "heldout")
+    # The same images, with labels and instructions for the OTHER target: the words must move the choice.
+    swapped = replace(
+        test,
+        targets=[(t[1], t[0]) for t in test.targets],
+        labels=torch.tensor(
+            [label_index(t[1].offset_px, index.default_epsilon_px()) for t in test.targets], dtype=torch.long
+        ),
+        kinds=[t[1].kind for t in test.targets],
+    )
+    other = evaluate_loaded(ckpt, swapped, "heldout")
+    assert named.rank1 >= 0.7 and other.rank1 >= 0.7, (named.rank1, other.rank1)
+    ev = evaluate_checkpoint(tmp_path / "run", data, "heldout")
+    assert ev.presence is not None and ev.presence["auroc"] >= 0.8, ev.presence
+    assert set(ev.by_targets_in_view) == {"2"}
+
+
+def label_index(offset: tuple[float, float], eps: float) -> int:
+    from controller.planning.actions import label_from_offset
+
+    return label_from_offset(offset[0], offset[1], eps).index

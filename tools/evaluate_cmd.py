@@ -16,7 +16,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--instructions",
         default="train",
-        help="train (training-style), heldout (never-seen paraphrases) or a text FILE (one per line)",
+        help="train (training-style), heldout (never-seen paraphrases and synonyms) or a text FILE: "
+        "one instruction per line ({target} filled with the target's name), or `kind: phrase` lines "
+        "(each test image gets a phrase of its named target's kind)",
     )
     p.add_argument(
         "--split", default="test", choices=("test", "train", "goal"), help="dataset split to score"
@@ -46,6 +48,20 @@ def main(argv: list[str]) -> int:
     print(" " * 12 + " ".join(f"{n:>11}" for n in names))
     for name, row in zip(names, result.confusion, strict=True):
         print(f"{name:>11} " + " ".join(f"{v:>11}" for v in row))
+    if len(result.by_targets_in_view) > 1:
+        parts = [
+            f"{k} in view: {100 * g['rank1']:.2f}% of {g['n']}" for k, g in result.by_targets_in_view.items()
+        ]
+        print("rank-1 by targets in view: " + ", ".join(parts))
+    if result.presence is not None:
+        pr = result.presence
+        print(
+            f"not in view: AUROC {pr['auroc']:.4f}, accuracy {100 * pr['accuracy']:.2f}% "
+            f"({pr['n_present']} present, {pr['n_absent']} absent pairs), "
+            f"present called absent {100 * pr['false_absent_rate']:.2f}%, "
+            f"absent called present {100 * pr['false_present_rate']:.2f}%, "
+            f"mean absent confidence {pr['mean_absent_confidence']:.3f}"
+        )
     if args.latency > 0:
         from controller.planning.latent.bench import latency_on_dataset
 

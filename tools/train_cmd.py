@@ -21,7 +21,13 @@ from controller.planning.latent.config import (
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="dronectl train", description=__doc__)
-    p.add_argument("--data", type=Path, required=True, help="dataset folder written by `dronectl collect`")
+    p.add_argument(
+        "--data",
+        type=Path,
+        nargs="+",
+        required=True,
+        help="dataset folder(s) written by `dronectl collect` (several: trained on together)",
+    )
     p.add_argument(
         "--out", type=Path, required=True, help="run folder for the checkpoint, metrics and curves"
     )
@@ -125,7 +131,7 @@ def main(argv: list[str]) -> int:
     )
     from controller.planning.latent.train import train  # torch is imported only once arguments are valid
 
-    result = train(args.data, args.out, run.model, run.train, progress=not args.quiet)
+    result = train(list(args.data), args.out, run.model, run.train, progress=not args.quiet)
     print(
         json.dumps(
             {

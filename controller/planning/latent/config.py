@@ -54,6 +54,9 @@ Schedule = Literal["constant", "cosine"]
 Pooling = Literal["gap", "flatten", "keypoints"]
 Fusion = Literal["linear", "gated"]
 FUSIONS: tuple[str, ...] = ("linear", "gated")
+Conditioning = Literal["none", "film"]
+CONDITIONINGS: tuple[str, ...] = ("none", "film")
+TargetChoice = Literal["named", "described"]
 POOLINGS: tuple[str, ...] = ("gap", "flatten", "keypoints")
 
 DISTANCES: tuple[str, ...] = ("cosine", "euclidean", "both")
@@ -75,6 +78,12 @@ class ModelConfig:
     # instruction can weight image features (which object to centre when a distractor is in view).
     # With a linear fusion z_s − z* = W_img·(E_img − goal mean) does not depend on the instruction.
     fusion: Fusion = "linear"
+    # How the instruction reaches E_img: "none" (paper: only through the fusion) or "film" (FiLM:
+    # the instruction embedding scales and shifts every residual stage's channels, so the image
+    # features already single out the named target when several targets are in view).
+    conditioning: Conditioning = "none"
+    # A head on z_s giving the probability that the named target is in view (negative states).
+    presence_head: bool = False
     latent_dim: int = 128  # d: width of E_img, E_inst, z_s, Δ, g
     vocab_size: int = 5000  # upper bound; the tokenizer's real size is written here at build time
     max_tokens: int = 50
@@ -100,6 +109,8 @@ class ModelConfig:
             raise ValueError(f"pooling must be one of {POOLINGS}, got {self.pooling!r}")
         if self.fusion not in FUSIONS:
             raise ValueError(f"fusion must be one of {FUSIONS}, got {self.fusion!r}")
+        if self.conditioning not in CONDITIONINGS:
+            raise ValueError(f"conditioning must be one of {CONDITIONINGS}, got {self.conditioning!r}")
         if self.max_tokens < 4:
             raise ValueError(f"max_tokens must be >= 4, got {self.max_tokens}")
 
@@ -199,6 +210,13 @@ class TrainConfig:
     balance_kinds: bool = False
     epsilon_px: float | None = None  # None: DEFAULT 10 px at 224 scaled with the dataset's width
     augment: AugmentConfig = field(default_factory=AugmentConfig)
+    # Which target a training sample asks for: "named" (the paper's: the image's named target, by
+    # its kind's name) or "described" (any target in view, by a training synonym of its kind and,
+    # where two of one kind are in view, its colour; plus `absent_fraction` of samples naming
+    # something not in view, which train only the presence head). `phrasing.py` has the words.
+    target_choice: TargetChoice = "named"
+    absent_fraction: float = 0.2
+    presence_weight: float = 0.5
     seed: int = 0
     threads: int = 2
 
@@ -213,6 +231,10 @@ class TrainConfig:
             raise ValueError(f"lr_schedule must be constant or cosine, got {self.lr_schedule!r}")
         if self.temperature <= 0:
             raise ValueError("temperature must be > 0")
+        if self.target_choice not in ("named", "described"):
+            raise ValueError(f"target_choice must be named or described, got {self.target_choice!r}")
+        if not 0.0 <= self.absent_fraction < 1.0 or self.presence_weight < 0:
+            raise ValueError("absent_fraction must be in [0, 1) and presence_weight >= 0")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -237,6 +259,24 @@ PRESETS: dict[str, Preset] = {
             augment=AugmentConfig(translate=0.25),
         ),
     ),
+    # The cpu preset taught to choose by the words: FiLM, a presence head, described targets.
+    "grounded": Preset(
+        ModelConfig(
+            image_size=128,
+            base_width=16,
+            coord_channels=True,
+            pooling="flatten",
+            conditioning="film",
+            presence_head=True,
+        ),
+        TrainConfig(
+            lr_schedule="cosine",
+            temperature=0.1,
+            weights=LossWeights(dir=1.0, rank=1.0, cons=0.1, reg=0.01),
+            augment=AugmentConfig(translate=0.25),
+            target_choice="described",
+        ),
+    ),
 }
 
 PRESET_NOTES: dict[str, str] = {
@@ -247,6 +287,11 @@ PRESET_NOTES: dict[str, str] = {
         "for the label); label-exact translation augmentation up to ±25 % of the image; ranking "
         "temperature 0.1 (paper 1.0); loss weights dir 1, rank 1, cons 0.1, reg 0.01; cosine "
         "learning-rate decay. Else as the paper."
+    ),
+    "grounded": (
+        "the cpu preset, plus: FiLM conditioning of E_img on the instruction, a presence head on z_s, "
+        "and described targets (any target in view asked for by a kind synonym and, where needed, its "
+        "colour; 20 % of samples ask for something not in view and train only the presence head)."
     ),
 }
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -24,8 +24,20 @@ from controller.planning.latent.errors import TrainingDataError
 from core.centring import default_epsilon_px
 from core.dataset import DatasetError as ManifestError
 from core.dataset import load_manifest, read_rgb
+from core.targets import colour_name
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class TargetRef:
+    """One target of an image, as a planner's training sample can ask for it."""
+
+    kind: str
+    attribute: str | None
+    """Its trim colour's name (core.targets), None where the manifest does not say."""
+    offset_px: tuple[float, float]
+    in_view: bool
 
 
 @dataclass(frozen=True)
@@ -39,6 +51,8 @@ class Row:
     offset_px: tuple[float, float]
     scene_seed: int
     in_view: bool
+    targets: tuple[TargetRef, ...] = ()
+    """Every target of the scene, the named one first (one entry for a single-target dataset)."""
 
 
 @dataclass(frozen=True)
@@ -58,7 +72,8 @@ class DatasetIndex:
 
 @dataclass
 class ImageSet:
-    """Images (N, 3, S, S) uint8, labels (N,) action indices, offsets (N, 2) px, kinds, ids, splits."""
+    """Images (N, 3, S, S) uint8, labels (N,) action indices, offsets (N, 2) px, kinds, ids, splits,
+    and every image's targets (the named one first; labels and offsets are the named target's)."""
 
     images: torch.Tensor
     labels: torch.Tensor
@@ -66,6 +81,7 @@ class ImageSet:
     kinds: list[str]
     ids: list[str]
     splits: list[str]
+    targets: list[tuple[TargetRef, ...]] = field(default_factory=list)
 
     def __len__(self) -> int:
         return int(self.images.shape[0])
@@ -79,6 +95,7 @@ class ImageSet:
             [self.kinds[i] for i in idx.tolist()],
             [self.ids[i] for i in idx.tolist()],
             [self.splits[i] for i in idx.tolist()],
+            [self.targets[i] for i in idx.tolist()] if self.targets else [],
         )
 
 
@@ -99,6 +116,30 @@ def load_index(root: Path) -> DatasetIndex:
     return DatasetIndex(root, meta, rows, width, height)
 
 
+def _target_refs(raw: dict[str, Any]) -> tuple[TargetRef, ...]:
+    """Every target of a manifest row, named first: its `targets` list, or the named target alone
+    (a dataset written before multi-target scenes; the colour then comes from the scene parameters)."""
+    listed = raw.get("targets")
+    if isinstance(listed, list) and listed:
+        refs = []
+        for t in listed:
+            off = t.get("offset_px") or (float("nan"), float("nan"))
+            refs.append(
+                TargetRef(
+                    str(t["kind"]), t.get("attribute"), (float(off[0]), float(off[1])), bool(t.get("in_view"))
+                )
+            )
+        named = int(raw.get("named", 0))
+        return (refs[named], *refs[:named], *refs[named + 1 :])
+    bezel = ((raw.get("scene") or {}).get("target") or {}).get("bezel_colour")
+    off = raw["offset_px"] or (float("nan"), float("nan"))
+    attribute = colour_name(bezel) if isinstance(bezel, str) else None
+    named = TargetRef(
+        str(raw["target_kind"]), attribute, (float(off[0]), float(off[1])), bool(raw["in_view"])
+    )
+    return (named,)
+
+
 def _row(raw: dict[str, Any], root: Path) -> Row:
     offset = raw["offset_px"]
     return Row(
@@ -109,6 +150,7 @@ def _row(raw: dict[str, Any], root: Path) -> Row:
         offset_px=(float(offset[0]), float(offset[1])),
         scene_seed=int(raw["scene_seed"]),
         in_view=bool(raw["in_view"]),
+        targets=_target_refs(raw),
     )
 
 
@@ -121,10 +163,19 @@ def read_image(path: Path, size: int) -> np.ndarray:
 
 
 def load_images(
-    rows: Sequence[Row], size: int, epsilon_px: float, desc: str = "images", progress: bool = False
+    rows: Sequence[Row],
+    size: int,
+    epsilon_px: float,
+    desc: str = "images",
+    progress: bool = False,
+    in_view_only: bool = True,
 ) -> ImageSet:
-    """Decode `rows` into an `ImageSet` with labels derived at ε = `epsilon_px` (dataset pixels)."""
-    usable = [r for r in rows if r.in_view and np.isfinite(r.offset_px).all()]
+    """Decode `rows` into an `ImageSet` with labels derived at ε = `epsilon_px` (dataset pixels).
+
+    `in_view_only=False` keeps rows whose named target is out of view (the `empty` split, for
+    judging a model's "not in view"); their labels are meaningless and must not be scored.
+    """
+    usable = [r for r in rows if (r.in_view or not in_view_only) and np.isfinite(r.offset_px).all()]
     if len(usable) < len(rows):
         log.info("%s: skipped %d rows with no target in view", desc, len(rows) - len(usable))
     if not usable:
@@ -140,6 +191,7 @@ def load_images(
         kinds=[r.target_kind for r in usable],
         ids=[r.id for r in usable],
         splits=[r.split for r in usable],
+        targets=[r.targets for r in usable],
     )
 
 

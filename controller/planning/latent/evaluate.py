@@ -3,7 +3,8 @@
 "Training-style" instructions are those the model was trained with (the fixed
 instruction, or the 30 training paraphrases); "heldout" are the paraphrases never
 seen in training (the paper's vision + text generalisation); a FILE holds any
-instructions, one per line (`{target}` slots are filled with the target's name).
+instructions, one per line (`{target}` slots are filled with the target's name), or
+`kind: phrase` lines (each image gets a phrase written for its named target's kind).
 Each test image is paired with one instruction drawn by a seeded generator.
 """
 
@@ -20,9 +21,12 @@ import torch
 
 from controller.planning.actions import NUM_ACTIONS
 from controller.planning.latent.checkpoint import LoadedCheckpoint, load_checkpoint
-from controller.planning.latent.data import ImageSet, load_images, load_index, to_float
+from controller.planning.latent.data import ImageSet, TargetRef, load_images, load_index, to_float
+from controller.planning.latent.errors import InstructionError
 from controller.planning.latent.instructions import builtin_templates, fill, read_templates
 from controller.planning.latent.model import LatentDynamicsModel
+from controller.planning.latent.pairs import target_name_for
+from controller.planning.latent.phrasing import describe, is_kind_phrase_file, read_kind_phrases
 from controller.planning.latent.tokenizer import InstructionTokenizer
 
 log = logging.getLogger(__name__)
@@ -40,10 +44,17 @@ class EvalResult:
     labels: list[int] = field(default_factory=list)
     offsets_px: list[list[float]] = field(default_factory=list)
     ids: list[str] = field(default_factory=list)
+    by_targets_in_view: dict[str, dict[str, float]] = field(default_factory=dict)
+    """Rank-1 by how many targets the image shows ("1", "2", "3", "4"): {"n", "rank1"}."""
+    presence: dict[str, float | int] | None = None
+    """`presence_eval.PresenceResult.summary()` for a checkpoint with a presence head."""
 
     def summary(self) -> dict[str, Any]:
-        keys = ("rank1", "x_accuracy", "z_accuracy", "n", "instructions", "confusion")
-        return {k: getattr(self, k) for k in keys}
+        keys = ("rank1", "x_accuracy", "z_accuracy", "n", "instructions", "confusion", "by_targets_in_view")
+        out = {k: getattr(self, k) for k in keys}
+        if self.presence is not None:
+            out["presence"] = self.presence
+        return out
 
 
 def instruction_templates(setting: str, trained_with: str) -> list[str]:
@@ -64,14 +75,23 @@ def pair_instructions(kinds: Sequence[str], templates: Sequence[str], seed: int)
 
 @torch.inference_mode()
 def goal_embedding(
-    model: LatentDynamicsModel, goal_images_u8: torch.Tensor, batch: int = 128
+    model: LatentDynamicsModel,
+    goal_images_u8: torch.Tensor,
+    goal_ids: torch.Tensor | None = None,
+    batch: int = 128,
 ) -> torch.Tensor:
-    """(d,) mean E_img over all goal images, in eval mode: the stored half of the goal prototype."""
+    """(d,) mean E_img over all goal images, in eval mode: the stored half of the goal prototype.
+
+    A FiLM-conditioned model encodes each goal image under `goal_ids` (G, L), an instruction
+    naming its own centred target.
+    """
     model.eval()
-    parts = [
-        model.encode_images(to_float(goal_images_u8[i : i + batch]))
-        for i in range(0, len(goal_images_u8), batch)
-    ]
+    if model.conditioned and goal_ids is None:
+        raise ValueError("a FiLM-conditioned model needs each goal image's instruction (goal_ids)")
+    parts = []
+    for i in range(0, len(goal_images_u8), batch):
+        text = model.encode_text(goal_ids[i : i + batch]) if goal_ids is not None else None
+        parts.append(model.encode_images(to_float(goal_images_u8[i : i + batch]), text))
     return torch.cat(parts).mean(dim=0)
 
 
@@ -113,12 +133,86 @@ def score(distances: torch.Tensor, data: ImageSet, setting: str) -> EvalResult:
     )
 
 
+def pair_described(
+    targets: Sequence[tuple[TargetRef, ...]], templates: Sequence[str], corpus: str, seed: int
+) -> list[str]:
+    """One instruction per image asking for its named target by a synonym of `corpus`, with its
+    colour where another target of its kind is in view (seeded)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for refs in targets:
+        visible = [t for t in refs if t.in_view] or [refs[0]]
+        out.append(describe(target_name_for(refs[0], visible, False), templates, corpus, rng))
+    return out
+
+
+def pair_kind_phrases(kinds: Sequence[str], phrases: dict[str, list[str]], seed: int) -> list[str]:
+    """One phrase per image from a `kind: phrase` file, written for its named target's kind (seeded)."""
+    missing = sorted(set(kinds) - set(phrases))
+    if missing:
+        raise InstructionError(f"the instruction file has no phrase for {missing}")
+    rng = np.random.default_rng(seed)
+    return [fill(phrases[k][int(rng.integers(len(phrases[k])))], k) for k in kinds]
+
+
+def instructions_for(ckpt: LoadedCheckpoint, data: ImageSet, setting: str, seed: int) -> list[str]:
+    """Each image's instruction under `setting` ("train", "heldout", a template file or a
+    `kind: phrase` file). A checkpoint trained on described targets hears its targets by
+    the setting's synonyms (held-out synonyms with held-out templates); one trained the
+    paper's way hears each kind's plain name, as it was trained and as its numbers were taken."""
+    train_meta = ckpt.meta.get("train", {})
+    trained_with = str(train_meta.get("instructions", "varied"))
+    if setting not in ("train", "heldout") and is_kind_phrase_file(Path(setting)):
+        return pair_kind_phrases(data.kinds, read_kind_phrases(Path(setting)), seed)
+    templates = instruction_templates(setting, trained_with)
+    if train_meta.get("target_choice", "named") == "described" and data.targets:
+        corpus = "heldout" if setting == "heldout" else ("fixed" if trained_with == "fixed" else "train")
+        return pair_described(data.targets, templates, corpus, seed)
+    return pair_instructions(data.kinds, templates, seed)
+
+
+def _by_targets_in_view(result: EvalResult, data: ImageSet) -> dict[str, dict[str, float]]:
+    groups: dict[str, list[bool]] = {}
+    for pred, true, refs in zip(result.predictions, result.labels, data.targets, strict=True):
+        groups.setdefault(str(sum(t.in_view for t in refs)), []).append(pred == true)
+    return {k: {"n": len(v), "rank1": sum(v) / len(v)} for k, v in sorted(groups.items())}
+
+
+def _words(ckpt: LoadedCheckpoint, setting: str) -> tuple[list[str], str]:
+    """The templates and synonym corpus a setting asks in (for pairs made up here, e.g. absent targets)."""
+    trained_with = str(ckpt.meta.get("train", {}).get("instructions", "varied"))
+    corpus = "heldout" if setting == "heldout" else ("fixed" if trained_with == "fixed" else "train")
+    if setting not in ("train", "heldout") and is_kind_phrase_file(Path(setting)):
+        return builtin_templates("heldout"), "heldout"
+    return instruction_templates(setting, trained_with), corpus
+
+
+def _presence(
+    ckpt: LoadedCheckpoint, data: ImageSet, empty: ImageSet | None, setting: str, seed: int
+) -> dict[str, float | int]:
+    from controller.planning.latent.presence_eval import (
+        absent_instructions,
+        empty_instructions,
+        judge_presence,
+        presence_probabilities,
+    )
+
+    templates, corpus = _words(ckpt, setting)
+    p_present = presence_probabilities(ckpt, data.images, instructions_for(ckpt, data, setting, seed))
+    negatives = [
+        presence_probabilities(ckpt, data.images, absent_instructions(data, templates, corpus, seed + 1))
+    ]
+    if empty is not None and len(empty):
+        negatives.append(
+            presence_probabilities(ckpt, empty.images, empty_instructions(empty, templates, corpus, seed))
+        )
+    return judge_presence(p_present, np.concatenate(negatives)).summary()
+
+
 def evaluate_loaded(
     ckpt: LoadedCheckpoint, data: ImageSet, setting: str = "train", seed: int = 0
 ) -> EvalResult:
-    trained_with = str(ckpt.meta.get("train", {}).get("instructions", "varied"))
-    templates = instruction_templates(setting, trained_with)
-    instructions = pair_instructions(data.kinds, templates, seed)
+    instructions = instructions_for(ckpt, data, setting, seed)
     dist = predict_distances(ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, data.images, instructions)
     return score(dist, data, setting)
 
@@ -137,5 +231,14 @@ def evaluate_checkpoint(
     eps = index.default_epsilon_px() if epsilon_px is None else epsilon_px
     data = load_images(index.split(split), ckpt.config.image_size, eps, desc=split)
     result = evaluate_loaded(ckpt, data, setting, seed)
+    result.by_targets_in_view = _by_targets_in_view(result, data)
+    if ckpt.model.presence is not None and data.targets:
+        empty_rows = index.split("empty") if split == "test" else []
+        empty = (
+            load_images(empty_rows, ckpt.config.image_size, eps, "empty", in_view_only=False)
+            if empty_rows
+            else None
+        )
+        result.presence = _presence(ckpt, data, empty, setting, seed)
     log.info("%s on %s/%s (%d images): rank-1 %.4f", model_dir, data_dir, split, result.n, result.rank1)
     return result

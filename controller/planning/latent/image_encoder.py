@@ -54,6 +54,7 @@ class ImageEncoder(nn.Module):
         coord_channels: bool = False,
         pooling: str = "gap",
         image_size: int = 224,
+        condition_dim: int = 0,
     ) -> None:
         super().__init__()
         self.coord_channels = coord_channels
@@ -73,18 +74,39 @@ class ImageEncoder(nn.Module):
             stages.append(nn.Sequential(BasicBlock(c, c_out, stride), BasicBlock(c_out, c_out, 1)))
             c = c_out
         self.stages = nn.Sequential(*stages)
+        self.widths = widths
+        # FiLM (Perez et al. 2018): a condition vector → per-channel (γ, β) for every stage's output,
+        # x ← x·(1 + γ) + β; zero-initialised, so an untrained FiLM is the identity.
+        self.film: nn.Linear | None = None
+        if condition_dim > 0:
+            self.film = nn.Linear(condition_dim, 2 * sum(widths))
+            nn.init.zeros_(self.film.weight)
+            nn.init.zeros_(self.film.bias)
         side = _final_side(image_size)  # S/32 rounded up, as the strided convolutions give it
         head_in = {"gap": c, "flatten": c * side * side, "keypoints": 3 * c}[pooling]
         self.proj = nn.Linear(head_in, out_dim)
         self.register_buffer("mean", torch.tensor(self.MEAN).view(1, 3, 1, 1), persistent=False)
         self.register_buffer("std", torch.tensor(self.STD).view(1, 3, 1, 1), persistent=False)
 
-    def forward(self, images: torch.Tensor) -> torch.Tensor:
+    def forward(self, images: torch.Tensor, condition: torch.Tensor | None = None) -> torch.Tensor:
+        """`condition` (B, condition_dim): the FiLM input (the instruction's embedding), if FiLM is on."""
         x = (images - self.mean) / self.std  # (B, 3, S, S)
         if self.coord_channels:
             x = torch.cat([x, _coord_planes(x)], dim=1)  # (B, 5, S, S)
         x = self.stem(x)  # (B, w, S/4, S/4)
-        x = self.stages(x)  # (B, 8w, S/32, S/32)
+        if self.film is None:
+            x = self.stages(x)  # (B, 8w, S/32, S/32)
+        else:
+            if condition is None:
+                raise ValueError("this image encoder is FiLM-conditioned: pass the instruction embedding")
+            gamma_beta = self.film(condition)  # (B, 2·Σw)
+            start = 0
+            for stage, width in zip(self.stages, self.widths, strict=True):
+                x = stage(x)
+                gamma = gamma_beta[:, start : start + width, None, None]  # (B, w_i, 1, 1)
+                beta = gamma_beta[:, start + width : start + 2 * width, None, None]
+                x = x * (1.0 + gamma) + beta
+                start += 2 * width
         if self.pooling == "flatten":
             return self.proj(x.flatten(1))  # (B, 8w·s·s) → (B, d)
         pooled = x.mean(dim=(2, 3))  # (B, 8w) global average pool

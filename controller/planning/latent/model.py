@@ -8,6 +8,11 @@
     z*   = fuse(concat(mean_i E_img(goal_i), E_inst(instr)))
 
 Planning scores every action by D(ẑ'_a, z*) and picks the smallest.
+
+With `conditioning="film"` E_img(x | E_inst(instr)) is FiLM-modulated by the instruction, and
+the goal mean is taken over goal images each encoded under an instruction naming its own
+centred target ("the named target is centred", whichever it is); `presence_head` adds
+p(named target in view) = σ(MLP(z_s)).
 """
 
 from __future__ import annotations
@@ -32,7 +37,12 @@ class LatentDynamicsModel(nn.Module):
         self.config = config
         d = config.latent_dim
         self.image_encoder = ImageEncoder(
-            d, config.base_width, config.coord_channels, config.pooling, config.image_size
+            d,
+            config.base_width,
+            config.coord_channels,
+            config.pooling,
+            config.image_size,
+            condition_dim=d if config.conditioning == "film" else 0,
         )
         self.text_encoder = TextEncoder(
             config.vocab_size,
@@ -59,6 +69,9 @@ class LatentDynamicsModel(nn.Module):
             nn.Dropout(config.dynamics_dropout),
             nn.Linear(h, d),
         )
+        self.presence: nn.Module | None = None
+        if config.presence_head:  # z_s → logit of "the named target is in view"
+            self.presence = nn.Sequential(nn.Linear(d, 64), nn.ReLU(), nn.Linear(64, 1))
         self.global_x = nn.Parameter(torch.zeros(3, d))  # g_X
         self.global_z = nn.Parameter(torch.zeros(3, d))  # g_Z
         nn.init.normal_(self.global_x, std=0.01)
@@ -67,9 +80,20 @@ class LatentDynamicsModel(nn.Module):
         self.register_buffer("action_z_index", ACTION_Z.clone(), persistent=False)
 
     # --- encoders -----------------------------------------------------------------------------
-    def encode_images(self, images: torch.Tensor) -> torch.Tensor:
-        """(B, 3, S, S) in [0, 1] → (B, d) E_img."""
-        return self.image_encoder(images)
+    @property
+    def conditioned(self) -> bool:
+        """Whether E_img takes the instruction (FiLM), so an image embedding depends on the words."""
+        return self.config.conditioning == "film"
+
+    def encode_images(self, images: torch.Tensor, text_emb: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, 3, S, S) in [0, 1] (+ (B, d) E_inst when FiLM-conditioned) → (B, d) E_img."""
+        return self.image_encoder(images, text_emb if self.conditioned else None)
+
+    def presence_logits(self, z_s: torch.Tensor) -> torch.Tensor:
+        """(B, d) z_s → (B,) logits of "the named target is in view" (needs `presence_head`)."""
+        if self.presence is None:
+            raise ValueError("this model has no presence head")
+        return self.presence(z_s).squeeze(-1)
 
     def encode_text(self, ids: torch.Tensor) -> torch.Tensor:
         """(B, L) token ids → (B, d) E_inst."""
@@ -114,6 +138,6 @@ class LatentDynamicsModel(nn.Module):
     ) -> torch.Tensor:
         """Planning in one call: (B, 3, S, S), (B, L), (d,) → (B, 9) distances to the goal."""
         text = self.encode_text(ids)
-        z_s = self.fuse_state(self.encode_images(images), text)
+        z_s = self.fuse_state(self.encode_images(images, text), text)
         z_goal = self.fuse_state(goal_image_embedding.expand_as(text), text)
         return self.score(z_s, z_goal)[0]

@@ -50,18 +50,34 @@ class LatentPlanner:
         actions, distances = self.plan_batch([image], instruction)
         return actions[0], distances[0]
 
-    @torch.inference_mode()
     def plan_batch(self, images: Sequence[np.ndarray], instruction: str) -> tuple[list[Action], np.ndarray]:
         """Plan for several images under one instruction: (actions, distances (N, 9))."""
+        actions, dist, _ = self.plan_with_presence(images, instruction)
+        return actions, dist
+
+    @property
+    def has_presence(self) -> bool:
+        """Whether the checkpoint says how sure it is that the asked-for target is in view."""
+        return self.model.presence is not None
+
+    @torch.inference_mode()
+    def plan_with_presence(
+        self, images: Sequence[np.ndarray], instruction: str
+    ) -> tuple[list[Action], np.ndarray, np.ndarray | None]:
+        """(actions, distances (N, 9), p(asked-for target in view) (N,) or None without a presence head)."""
         if len(images) == 0:
             raise ImageInputError("plan_batch needs at least one image")
         text, z_goal = self._instruction(instruction)
         x = torch.from_numpy(np.stack([self.prepare(img) for img in images]))  # (N, S, S, 3) uint8
         x = x.permute(0, 3, 1, 2).to(torch.float32).div_(255.0)  # (N, 3, S, S), channels-last strides
         n = x.shape[0]
-        z_s = self.model.fuse_state(self.model.encode_images(x), text.expand(n, -1))  # (N, d)
+        text_n = text.expand(n, -1)
+        z_s = self.model.fuse_state(self.model.encode_images(x, text_n), text_n)  # (N, d)
         dist = self.model.score(z_s, z_goal.expand(n, -1))[0].numpy().astype(np.float32)  # (N, 9)
-        return [Action.from_index(int(i)) for i in dist.argmin(axis=1)], dist
+        presence = None
+        if self.model.presence is not None:
+            presence = torch.sigmoid(self.model.presence_logits(z_s)).numpy().astype(np.float32)
+        return [Action.from_index(int(i)) for i in dist.argmin(axis=1)], dist, presence
 
     def prepare(self, image: np.ndarray) -> np.ndarray:
         """Check an RGB uint8 H×W×3 image and resize it to the model's input size."""

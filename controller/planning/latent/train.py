@@ -13,24 +13,44 @@ import json
 import logging
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 from tqdm import tqdm
 
 from controller.planning.latent.augment import augment, label_exact, labels_of
 from controller.planning.latent.checkpoint import save_checkpoint
 from controller.planning.latent.config import ModelConfig, TrainConfig
-from controller.planning.latent.data import ImageSet, load_images, load_index, split_train_val, to_float
+from controller.planning.latent.data import (
+    DatasetIndex,
+    ImageSet,
+    load_images,
+    load_index,
+    split_train_val,
+    to_float,
+)
 from controller.planning.latent.errors import TrainingDataError
-from controller.planning.latent.evaluate import goal_embedding, pair_instructions, predict_distances, score
+from controller.planning.latent.evaluate import (
+    goal_embedding,
+    pair_described,
+    pair_instructions,
+    predict_distances,
+    score,
+)
 from controller.planning.latent.instructions import builtin_templates, fill, tokenizer_corpus
-from controller.planning.latent.losses import LossTerms, distance, total_loss
+from controller.planning.latent.losses import LossTerms
 from controller.planning.latent.model import LatentDynamicsModel
+from controller.planning.latent.pairs import DescriptionSampler
+from controller.planning.latent.phrasing import all_phrasings
 from controller.planning.latent.plots import plot_curves
 from controller.planning.latent.tokenizer import InstructionTokenizer
+from controller.planning.latent.train_described import goal_ids as _goal_ids
+from controller.planning.latent.train_described import ranking_terms
+from controller.planning.latent.train_described import step_described as _step_described
 
 log = logging.getLogger(__name__)
 METRICS_FILE = "metrics.json"
@@ -62,17 +82,45 @@ class _InstructionSampler:
         return rows[:, : int(rows.ne(0).sum(dim=1).max())]
 
 
+def _merged_index(data_dirs: Sequence[Path]) -> DatasetIndex:
+    """One index over several dataset folders (rows in folder order); all must share the image size."""
+    indices = [load_index(d) for d in data_dirs]
+    first = indices[0]
+    for other in indices[1:]:
+        if (other.width_px, other.height_px) != (first.width_px, first.height_px):
+            raise TrainingDataError(
+                f"{other.root}: images are {other.width_px}×{other.height_px} px, "
+                f"{first.root} has {first.width_px}×{first.height_px}; train on one image size"
+            )
+    if len(indices) == 1:
+        return first
+    meta = {**first.meta, "merged": [{"path": str(i.root), "meta": i.meta} for i in indices]}
+    rows = tuple(r for i in indices for r in i.rows)
+    return DatasetIndex(first.root, meta, rows, first.width_px, first.height_px)
+
+
 def train(
-    data_dir: Path, out_dir: Path, model_cfg: ModelConfig, cfg: TrainConfig, progress: bool = True
+    data_dir: Path | Sequence[Path],
+    out_dir: Path,
+    model_cfg: ModelConfig,
+    cfg: TrainConfig,
+    progress: bool = True,
 ) -> TrainResult:
-    """Train on `data_dir` (a collected dataset folder); write the best checkpoint + metrics to `out_dir`."""
+    """Train on `data_dir` (a collected dataset folder, or several); write the best checkpoint + metrics."""
     torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
 
-    index = load_index(data_dir)
+    data_dirs = [Path(data_dir)] if isinstance(data_dir, str | Path) else [Path(d) for d in data_dir]
+    if not data_dirs:
+        raise TrainingDataError("no dataset folder to train on")
+    data_dir = data_dirs[0]
+    described = cfg.target_choice == "described"
+    if described and model_cfg.conditioning == "none" and not model_cfg.presence_head:
+        log.warning("target_choice 'described' without FiLM or a presence head: the words reach z_s only")
+    index = _merged_index(data_dirs)
     eps = index.default_epsilon_px() if cfg.epsilon_px is None else cfg.epsilon_px
     rows = index.split("train") + (index.split("goal") if cfg.goal_as_samples else [])
     pool = load_images(rows, model_cfg.image_size, eps, desc="train", progress=progress)
@@ -89,12 +137,25 @@ def train(
             f"{data_dir}: only {len(train_set)} training images; need at least a quarter batch"
         )
 
-    tokenizer = InstructionTokenizer.train(tokenizer_corpus(), model_cfg.vocab_size, model_cfg.max_tokens)
+    templates = builtin_templates("fixed" if cfg.instructions == "fixed" else "train")
+    corpus = "fixed" if cfg.instructions == "fixed" else "train"
+    if described:
+        text_corpus = all_phrasings(builtin_templates("fixed") + templates, corpus)
+    else:
+        text_corpus = tokenizer_corpus()
+    tokenizer = InstructionTokenizer.train(text_corpus, model_cfg.vocab_size, model_cfg.max_tokens)
     model_cfg = replace(model_cfg, vocab_size=tokenizer.vocab_size)
     model = LatentDynamicsModel(model_cfg)
-    templates = builtin_templates("fixed" if cfg.instructions == "fixed" else "train")
-    sampler = _InstructionSampler(tokenizer, templates, pool.kinds)
-    val_instructions = pair_instructions(val_set.kinds, templates, cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
+    sampler: _InstructionSampler | DescriptionSampler
+    if described:
+        sampler = DescriptionSampler(tokenizer, templates, corpus, cfg.absent_fraction)
+        val_instructions = pair_described(val_set.targets, templates, corpus, cfg.seed)
+        goal_ids = _goal_ids(tokenizer, goals, corpus)
+    else:
+        sampler = _InstructionSampler(tokenizer, templates, pool.kinds)
+        val_instructions = pair_instructions(val_set.kinds, templates, cfg.seed)
+        goal_ids = None
 
     steps_per_epoch = math.ceil(len(train_set) / cfg.batch_size)
     optimiser = torch.optim.Adam(model.parameters(), lr=cfg.learning_rate)
@@ -120,11 +181,18 @@ def train(
         model.train()
         order = _epoch_order(train_set.kinds, cfg.balance_kinds, gen)
         sums = dict.fromkeys(("total", "dir", "rank", "cons", "reg"), 0.0)
-        correct = 0
+        correct = n_scored = 0
         for b in range(steps_per_epoch):
             idx = order[b * cfg.batch_size : (b + 1) * cfg.batch_size]
             g_idx = torch.randint(len(goals), (cfg.goal_sample,), generator=gen)
-            terms, d_all, labels = _step(model, cfg, train_set, goals, idx, g_idx, sampler, size_px, eps, gen)
+            if isinstance(sampler, DescriptionSampler):
+                terms, d_all, labels = _step_described(
+                    model, cfg, train_set, goals, idx, g_idx, sampler, size_px, eps, gen, rng
+                )
+            else:
+                terms, d_all, labels = _step(
+                    model, cfg, train_set, goals, idx, g_idx, sampler, size_px, eps, gen
+                )
             optimiser.zero_grad(set_to_none=True)
             terms.total.backward()
             optimiser.step()
@@ -132,13 +200,14 @@ def train(
             for k, v in terms.as_floats().items():
                 sums[k] += v * len(idx)
             correct += int((d_all.detach().argmin(dim=1) == labels).sum())
+            n_scored += len(labels)
             seen += len(idx) + cfg.goal_sample
-        goal = goal_embedding(model, goals.images)
+        goal = goal_embedding(model, goals.images, goal_ids)
         val = score(
             predict_distances(model, tokenizer, goal, val_set.images, val_instructions), val_set, "train"
         )
         row = {k: v / len(train_set) for k, v in sums.items()}
-        row.update(epoch=epoch, train_accuracy=correct / len(train_set), val_accuracy=val.rank1)
+        row.update(epoch=epoch, train_accuracy=correct / max(1, n_scored), val_accuracy=val.rank1)
         row.update(lr=schedule.get_last_lr()[0], seconds=time.perf_counter() - start)
         history.append(row)
         if val.rank1 > best_acc:
@@ -214,16 +283,5 @@ def _step(
     text = model.encode_text(sampler.sample([data.kinds[i] for i in idx.tolist()], gen))  # (B, d)
     z_s = model.fuse_state(img[:b], text)  # (B, d)
     z_goal = model.fuse_state(goal_mean.expand(b, -1), text)  # (B, d)
-    d_all, deltas = model.score(z_s, z_goal)  # (B, 9), (B, 9, d)
-    rows = torch.arange(b)
-    terms = total_loss(
-        d_now=distance(z_s, z_goal, model.config.distance),
-        d_all=d_all,
-        target=labels,
-        delta_true=deltas[rows, labels],
-        g_true=model.global_shifts()[labels],
-        weights=cfg.weights,
-        margin=cfg.margin,
-        temperature=cfg.temperature,
-    )
+    terms, d_all = ranking_terms(model, cfg, z_s, z_goal, labels)
     return terms, d_all, labels
