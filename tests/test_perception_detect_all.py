@@ -8,6 +8,7 @@ import torch
 
 from core.targets import ATTRIBUTE_COLOURS, colour_name
 from perception.attributes import read_attribute
+from perception.detector_model import CentreNet, DetectorConfig
 from perception.image_detector import ImageDetector
 from sim_world.world import World
 
@@ -93,3 +94,26 @@ def test_read_attribute_on_synthetic_trim() -> None:
         box[18:46, 22:42] = (240, 238, 230)
         assert read_attribute(box, (20.0, 16.0, 44.0, 48.0), "switchbox") == name
     assert read_attribute(np.zeros((8, 8, 3), np.uint8), (3.0, 3.0, 3.5, 3.5), "gauge") is None
+
+
+def test_decoding_keeps_each_local_peak_once_and_drops_another_kind_on_the_same_object() -> None:
+    """A hand-made head output: a gauge peak with a weaker valve peak 1 cell away, a switch box elsewhere."""
+    detector = ImageDetector(CentreNet(DetectorConfig()))
+    grid, k = detector.config.grid_size, len(detector.config.kinds)
+    out = torch.zeros(1, k + 6, grid, grid)
+    out[:, :k] = -8.0  # sigmoid ≈ 0 everywhere
+    out[0, 0, 20, 10], out[0, 0, 20, 11] = 3.0, 2.0  # gauge peak and its shoulder (not a local maximum)
+    out[0, 1, 21, 11] = 2.5  # valve, one cell off the gauge: inside its box, the same object
+    out[0, 2, 40, 45] = 1.0  # switch box, far away
+    out[0, 2, 40, 47] = 0.5  # its second peak, inside its box
+    out[0, 1, 5, 50] = -1.0  # a valve below the score threshold
+    out[0, k + 2 : k + 6] = float(np.log(12.0 / 16.0))  # every box 12 px each way
+    detector._model = lambda x: out.expand(x.shape[0], -1, -1, -1)  # the network stubbed by its output
+    found = detector.detect_all(np.full((224, 224, 3), 128, np.uint8))
+    assert [d.kind for d in found] == ["gauge", "switchbox"]
+    assert found[0].centre_px == pytest.approx((40.0, 80.0)) and found[0].confidence == pytest.approx(
+        0.9526, abs=1e-4
+    )
+    assert found[1].centre_px == pytest.approx((180.0, 160.0))
+    single = detector.detect(np.full((224, 224, 3), 128, np.uint8))
+    assert single is not None and single.centre_px == found[0].centre_px
