@@ -3,7 +3,9 @@
 `Detector.detect(image) -> Detection | None`. Two backends: `TruthDetector` (here;
 reads the simulator's geometry and segmentation, for data generation and judging
 only, never for deciding) and `image_detector.ImageDetector` (pixels alone, what
-the controller uses on a real drone and in simulation alike).
+the controller uses on a real drone and in simulation alike; it also has
+`detect_all(image) -> list[Detection]`, every target with its kind and attribute,
+which the centring loop prefers where a detector has it).
 """
 
 from __future__ import annotations

@@ -5,12 +5,19 @@ Loads a run folder written by `dronectl train-detector` (`model.safetensors` +
 weights shipped in `perception/assets/detector/`. A frame of any size is resized to
 the network's input size and the result scaled back to the frame's pixels.
 
-Decoding takes the single strongest heatmap peak over all kinds: its value is the
+`detect` decodes the single strongest heatmap peak over all kinds: its value is the
 confidence, its channel the kind, the offset head places the centre inside the
 cell and the edge head gives the box. Below `score_threshold` the detector
 returns None: an absent target, or one whose centre is out of the image (the
 network is trained to stay silent then, so it never reports a confident box
 for a target it cannot centre on).
+
+`detect_all` decodes every target: each local maximum of each kind's heatmap
+(3×3 max-pool non-maximum suppression) at or above `score_threshold`, strongest
+first; a weaker peak whose centre lies inside a stronger detection's box is the
+same object seen as another kind (or a second peak of it) and is dropped. Each
+detection also carries its attribute, the trim colour read from the pixels
+(`perception.attributes.read_attribute`).
 """
 
 from __future__ import annotations
@@ -18,13 +25,16 @@ from __future__ import annotations
 import json
 import logging
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 import torch
+import torch.nn.functional as F
 from safetensors.torch import load_file, save_file
 
+from perception.attributes import read_attribute
 from perception.detector_model import EDGE_SCALE_PX, STRIDE, CentreNet, DetectorConfig, fuse_for_inference
 from perception.errors import DetectorCheckpointError
 from perception.types import Detection
@@ -131,17 +141,32 @@ class ImageDetector:
         """The target in one RGB uint8 (H, W, 3) image, or None."""
         return self.detect_batch([image])[0]
 
+    def detect_all(self, image: np.ndarray) -> list[Detection]:
+        """Every target in one RGB uint8 (H, W, 3) image, strongest first, with kind and attribute."""
+        return self.detect_all_batch([image])[0]
+
     @torch.inference_mode()
     def detect_batch(self, images: Sequence[np.ndarray]) -> list[Detection | None]:
         """`detect` for several images at once (evaluation)."""
         if not images:
             return []
+        out = self._forward(images)  # (B, K + 6, G, G)
+        return [self._decode(out[i], images[i].shape[1], images[i].shape[0]) for i in range(len(images))]
+
+    @torch.inference_mode()
+    def detect_all_batch(self, images: Sequence[np.ndarray]) -> list[list[Detection]]:
+        """`detect_all` for several images at once."""
+        if not images:
+            return []
+        out = self._forward(images)
+        return [self._decode_all(out[i], images[i]) for i in range(len(images))]
+
+    def _forward(self, images: Sequence[np.ndarray]) -> torch.Tensor:
         batch = np.stack([self._prepare(im) for im in images])  # (B, S, S, 3)
         x = normalise(torch.from_numpy(batch).permute(0, 3, 1, 2)).contiguous(
             memory_format=torch.channels_last
         )
-        out = self._model(x)  # (B, K + 6, G, G)
-        return [self._decode(out[i], images[i].shape[1], images[i].shape[0]) for i in range(len(images))]
+        return self._model(x)  # (B, K + 6, G, G)
 
     def _decode(self, out: torch.Tensor, width: int, height: int) -> Detection | None:
         k = len(self.config.kinds)
@@ -153,6 +178,29 @@ class ImageDetector:
         score = float(torch.sigmoid(heat[kind, j, i]))
         if score < self.score_threshold:
             return None
+        return self._detection_at(out, kind, j, i, score, width, height)
+
+    def _decode_all(self, out: torch.Tensor, image: np.ndarray) -> list[Detection]:
+        height, width = image.shape[:2]
+        heat = torch.sigmoid(out[: len(self.config.kinds)])  # (K, G, G)
+        peaks = (heat == F.max_pool2d(heat[None], 3, stride=1, padding=1)[0]) & (heat >= self.score_threshold)
+        found = sorted(
+            ((float(heat[kind, j, i]), kind, j, i) for kind, j, i in peaks.nonzero().tolist()), reverse=True
+        )
+        kept: list[Detection] = []
+        for score, kind, j, i in found:
+            det = self._detection_at(out, kind, j, i, score, width, height)
+            u, v = det.centre_px
+            if any(o.bbox_px[0] <= u <= o.bbox_px[2] and o.bbox_px[1] <= v <= o.bbox_px[3] for o in kept):
+                continue  # the same object, seen again as another kind or a side peak
+            kept.append(det)
+        return [replace(d, attribute=read_attribute(image, d.bbox_px, d.kind)) for d in kept]
+
+    def _detection_at(
+        self, out: torch.Tensor, kind: int, j: int, i: int, score: float, width: int, height: int
+    ) -> Detection:
+        """The detection of heatmap cell (j, i) of channel `kind`, in the frame's pixels."""
+        k = len(self.config.kinds)
         sx, sy = width / self.config.input_size, height / self.config.input_size
         u = (i + float(out[k, j, i])) * STRIDE * sx
         v = (j + float(out[k + 1, j, i])) * STRIDE * sy

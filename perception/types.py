@@ -38,10 +38,12 @@ class Detection:
     `centre_px` is the projection of the target face's centre (the point the
     controller centres), which under perspective need not be the middle of
     `bbox_px` = (u0, v0, u1, v1). `confidence` is in [0, 1]; `kind` is "gauge",
-    "valve", "switchbox" or None when the detector does not classify.
+    "valve", "switchbox" or None when the detector does not classify; `attribute` is
+    the trim colour's name (`core.targets.ATTRIBUTE_COLOURS`), None when not read.
     """
 
     bbox_px: tuple[float, float, float, float]
     centre_px: tuple[float, float]
     confidence: float
     kind: str | None = None
+    attribute: str | None = None

@@ -70,13 +70,29 @@ def test_target_lost_ends_holding_then_landing_and_fails_the_mission(tmp_path: P
     assert read_report(tmp_path)["outcome"] == "target_lost"
 
 
-def test_expected_target_lost_passes(tmp_path: Path) -> None:
+def test_expected_target_not_found_passes(tmp_path: Path) -> None:
     vehicle = FakeVehicle.at_pose(east_m=-0.5)
-    detector = FakeDetector(vehicle, misses=range(100))  # never seen
-    mission = parse_mission({"name": "fake-unseen", "expect": {"outcome": "target_lost"}})
+    detector = FakeDetector(vehicle, misses=range(100))  # never seen: not found (seen, then gone: lost)
+    mission = parse_mission(
+        {"name": "fake-unseen", "expect": {"outcome": "target_not_found"}, "loop": {"not_found_rereads": 2}}
+    )
     result = fly_kit(kit_for(vehicle, FakePlanner([RIGHT]), detector), mission, tmp_path, LIMITS)
     assert result.passed, result.failures
-    assert result.moves == 0  # never flies without a detection
+    assert result.moves == 0 and vehicle.moves_commanded == 0  # never flies without a detection
+    report = read_report(tmp_path)
+    assert report["outcome"] == "target_not_found" and len(report["steps"]) == 3
+    assert [s["event"] for s in report["steps"]] == ["not_found"] * 3
+
+
+def test_expected_target_lost_passes(tmp_path: Path) -> None:
+    vehicle = FakeVehicle.at_pose(east_m=-0.5)
+    detector = FakeDetector(vehicle, misses=range(1, 100))  # seen once, then gone
+    mission = parse_mission(
+        {"name": "fake-gone", "expect": {"outcome": "target_lost"}, "loop": {"lost_recoveries": 0}}
+    )
+    result = fly_kit(kit_for(vehicle, FakePlanner([RIGHT]), detector), mission, tmp_path, LIMITS)
+    assert result.passed, result.failures
+    assert read_report(tmp_path)["steps"][0]["detections"][0]["kind"] == "gauge"
 
 
 def test_report_survives_an_error_mid_flight(tmp_path: Path) -> None:

@@ -29,6 +29,7 @@ from PIL import Image
 
 from controller.planning.loop_records import StepRecord
 from perception.annotate import annotate
+from perception.types import Detection
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +43,17 @@ def _pair(value: tuple[float, float] | None) -> list[float] | None:
     return None if value is None else [round(float(value[0]), 3), round(float(value[1]), 3)]
 
 
+def detection_to_json(det: Detection) -> dict[str, Any]:
+    """One detection as JSON: box, centre, confidence, kind and attribute."""
+    return {
+        "bbox_px": [round(float(x), 2) for x in det.bbox_px],
+        "centre_px": _pair(det.centre_px),
+        "confidence": round(float(det.confidence), 4),
+        "kind": det.kind,
+        "attribute": det.attribute,
+    }
+
+
 def step_to_json(step: StepRecord) -> dict[str, Any]:
     """One step as JSON (the frame itself goes to the GIF, not here)."""
     t = step.telemetry
@@ -51,14 +63,8 @@ def step_to_json(step: StepRecord) -> dict[str, Any]:
         "event": step.event,
         "frame_number": step.frame.frame_number,
         "vehicle_time_s": round(step.vehicle_time_s, 3),
-        "detection": None
-        if det is None
-        else {
-            "bbox_px": [round(float(x), 2) for x in det.bbox_px],
-            "centre_px": _pair(det.centre_px),
-            "confidence": round(float(det.confidence), 4),
-            "kind": det.kind,
-        },
+        "detection": None if det is None else detection_to_json(det),
+        "detections": [detection_to_json(d) for d in step.detections],
         "offset_px": _pair(step.offset_px),
         "truth_offset_px": _pair(step.truth_offset_px),
         "centred": step.centred,

@@ -58,7 +58,7 @@ PlannerName = Literal["latent", "classic", "random", "oracle"]
 PLANNER_NAMES: tuple[str, ...] = ("latent", "classic", "random", "oracle")
 TargetKindName = Literal["gauge", "valve", "switchbox"]
 DetectorName = Literal["image", "truth"]
-OutcomeName = Literal["centred", "max_steps", "timeout", "target_lost", "planner_stalled"]
+OutcomeName = Literal["centred", "max_steps", "timeout", "target_lost", "target_not_found", "planner_stalled"]
 
 SIM = "sim"
 SIM_MAVLINK = "sim-mavlink"
@@ -166,6 +166,7 @@ class LoopOverrides(StrictModel):
     settle_s: float | None = Field(default=None, ge=0.0, le=5.0)
     max_stalls: int | None = Field(default=None, ge=1, le=20)
     lost_recoveries: int | None = Field(default=None, ge=0, le=5)
+    not_found_rereads: int | None = Field(default=None, ge=0, le=50)
     max_refinements: int | None = Field(default=None, ge=0, le=20)
     scale_moves: bool | None = None
     max_move_m: float | None = Field(default=None, gt=0.0, le=3.0)

@@ -51,6 +51,14 @@ out of view). Otherwise stop with the outcome
 `target_lost`, holding. The loop never moves without a detection, except to
 undo its own last move.
 
+The named target: the detector reports every target it sees (`detect_all`; a detector
+with only `detect` gives its one detection); the loop keeps the strongest one that the
+instruction names (`CentringConfig.target`, else `parse_instruction(instruction)`;
+`controller.planning.grounding`) and tests ε on it alone. Until the named target has
+been seen once in a run, no detection of it is "not found", not "lost": the loop holds
+and re-reads up to `not_found_rereads` frames, never moving, then stops with
+`target_not_found` and a message naming what was asked for and what was seen.
+
 Every step is recorded (`StepRecord`: frame, detection, action, the planner's 9
 distances, pose, timing) and handed to `on_step` as it happens, so a caller can
 persist it before the next step; an exception leaves `loop.steps` holding every
@@ -69,6 +77,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from controller.planning.actions import Action, XMove, ZMove
+from controller.planning.grounding import TargetQuery, describe_seen, parse_instruction, select_target
 from controller.planning.loop_records import (
     CentringConfig,
     CentringResult,
@@ -85,6 +94,7 @@ from flight.vehicle import Vehicle
 from perception.camera import Camera
 from perception.detector import Detector
 from perception.errors import CameraFrozenError
+from perception.types import Detection
 
 log = logging.getLogger(__name__)
 
@@ -99,6 +109,7 @@ class _RunState:
     stalls: int = 0
     refinements: int = 0
     rereads: int = 0
+    seen_target: bool = False  # the named target was detected at least once in this run
     recoveries: int = 0
     last_move: tuple[Action, tuple[float, float]] | None = None
     before_move: np.ndarray | None = None  # the picture the last move was planned on
@@ -125,7 +136,10 @@ class CentringLoop:
             t0 = time.perf_counter()
             record = self._observe_fresh(len(self.steps), state)
             outcome: Outcome | None = None
-            if record.detection is None:
+            state.seen_target = state.seen_target or record.detection is not None
+            if record.detection is None and not state.seen_target:
+                outcome = self._on_not_found(record, state)
+            elif record.detection is None:
                 outcome = self._on_lost(record, state)
             elif record.centred:
                 record.event, outcome = "centred", Outcome.CENTRED
@@ -141,7 +155,7 @@ class CentringLoop:
             self._keep(record)
             if outcome is not None:
                 self.vehicle.hold()
-                message = self._message(outcome, state.decisions)
+                message = self._message(outcome, state.decisions, record)
                 log.info("centring loop: %s", message)
                 return CentringResult(outcome, self.steps, message)
 
@@ -151,7 +165,12 @@ class CentringLoop:
         state.rereads = 0
         t_plan = time.perf_counter()
         observation = Observation(
-            record.frame.image, record.detection, cfg.instruction, cfg.epsilon_px, record.stop_threshold_px
+            record.frame.image,
+            record.detection,
+            cfg.instruction,
+            cfg.epsilon_px,
+            record.stop_threshold_px,
+            record.detections,
         )
         plan = self.planner.plan(observation)
         record.timing = replace(record.timing, plan_s=time.perf_counter() - t_plan)
@@ -220,6 +239,16 @@ class CentringLoop:
         )
         return signs if any(signs) else None  # type: ignore[return-value]
 
+    def _on_not_found(self, record: StepRecord, state: _RunState) -> Outcome | None:
+        """The named target not seen yet in this run: hold and re-read (bounded), never move."""
+        self.vehicle.hold()
+        record.event = "not_found"
+        if state.rereads < self.config.not_found_rereads:
+            state.rereads += 1
+            self.vehicle.sleep(self.config.settle_s)
+            return None
+        return Outcome.TARGET_NOT_FOUND
+
     def _on_lost(self, record: StepRecord, state: _RunState) -> Outcome | None:
         """No detection: hold; re-read, then undo the last move once, then give up (bounded)."""
         cfg = self.config
@@ -275,7 +304,8 @@ class CentringLoop:
         vehicle_time_s = self.vehicle.time_s()
         truth = self.truth_probe() if self.truth_probe is not None else None
         t1 = time.perf_counter()
-        detection = self.detector.detect(frame.image)
+        detections = self._detect_all(frame.image)
+        detection = select_target(detections, self.target)
         t2 = time.perf_counter()
         offset = offset_px(detection, frame.width, frame.height) if detection is not None else None
         threshold = self._stop_threshold_px(frame.width)
@@ -283,8 +313,21 @@ class CentringLoop:
         timing = StepTiming(t1 - t0, t2 - t1, 0.0, 0.0, 0.0)
         return StepRecord(
             index, frame, detection, offset, truth, centred, telemetry, vehicle_time_s, timing=timing,
-            stop_threshold_px=threshold,
+            stop_threshold_px=threshold, detections=detections,
         )  # fmt: skip
+
+    @property
+    def target(self) -> TargetQuery:
+        """What the loop centres: the configured query, else the instruction's reading."""
+        return self.config.target or parse_instruction(self.config.instruction)
+
+    def _detect_all(self, image: np.ndarray) -> tuple[Detection, ...]:
+        """Every detection, strongest first: `detect_all` where the detector has it, else `detect`'s one."""
+        detect_all = getattr(self.detector, "detect_all", None)
+        if callable(detect_all):
+            return tuple(detect_all(image))
+        detection = self.detector.detect(image)
+        return () if detection is None else (detection,)
 
     def stop_threshold_px(self, width: int) -> float:
         """ε minus the stopping margin for images `width` px wide; ValueError when that leaves nothing."""
@@ -311,8 +354,10 @@ class CentringLoop:
         if self.on_step is not None:
             self.on_step(record)
 
-    def _message(self, outcome: Outcome, decisions: int) -> str:
+    def _message(self, outcome: Outcome, decisions: int, last: StepRecord) -> str:
         cfg = self.config
+        if outcome is Outcome.TARGET_NOT_FOUND:
+            return f"no {self.target.describe()} in view; saw: {describe_seen(last.detections)}"
         return {
             Outcome.CENTRED: f"centred within {cfg.epsilon_px:g} px (detector) after {decisions} steps",
             Outcome.MAX_STEPS: f"not centred after the step budget of {cfg.max_steps}",

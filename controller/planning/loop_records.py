@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 
 from controller.planning.actions import Action
+from controller.planning.grounding import TargetQuery
 from flight.moves import MoveResult
 from flight.types import Telemetry
 from perception.types import Detection, Frame
@@ -26,6 +27,7 @@ class Outcome(str, Enum):
     MAX_STEPS = "max_steps"
     TIMEOUT = "timeout"
     TARGET_LOST = "target_lost"
+    TARGET_NOT_FOUND = "target_not_found"  # the named target was never seen in this run
     PLANNER_STALLED = "planner_stalled"
     ABORTED = "aborted"  # an exception or Ctrl-C ended the flight (set by the caller)
 
@@ -36,6 +38,8 @@ class CentringConfig:
 
     epsilon_px: float
     instruction: str = "center the gauge"
+    target: TargetQuery | None = None
+    """The target to centre among those detected; None: `parse_instruction(instruction)`."""
     max_steps: int = 20
     timeout_s: float = 120.0
     move_m: float = 0.3
@@ -49,6 +53,8 @@ class CentringConfig:
     max_stalls: int = 3
     lost_rereads: int = 2
     lost_recoveries: int = 1
+    not_found_rereads: int = 3
+    """Frames re-read, holding, while the named target has not been seen yet, before `target_not_found`."""
     stop_margin_px: float | None = None
     """Stop when the detector's offset is within ε − this on both axes; None: `default_stop_margin_px(W)`."""
     max_refinements: int = 4
@@ -82,6 +88,8 @@ class CentringConfig:
             raise ValueError(f"shrink must be in (0, 1], got {self.shrink}")
         if self.max_steps < 1 or self.max_stalls < 1 or self.lost_rereads < 0 or self.lost_recoveries < 0:
             raise ValueError("max_steps and max_stalls must be >= 1, lost_rereads and lost_recoveries >= 0")
+        if self.not_found_rereads < 0:
+            raise ValueError(f"not_found_rereads must be >= 0, got {self.not_found_rereads}")
         for name in ("timeout_s", "speed_m_s", "settle_speed_m_s", "settle_timeout_s", "frame_timeout_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
@@ -143,7 +151,7 @@ class StepRecord:
 
     index: int
     frame: Frame
-    detection: Detection | None
+    detection: Detection | None  # the named target's detection (`CentringConfig.target`), None: not seen
     offset_px: tuple[float, float] | None
     truth_offset_px: tuple[float, float] | None
     centred: bool
@@ -153,8 +161,10 @@ class StepRecord:
     distances: tuple[float, ...] | None = None
     move_m: tuple[float, float] | None = None  # commanded (right_m, up_m)
     move: MoveResult | None = None
-    event: str = ""  # "", "centred", "lost", "recovery", "refinement", "stall", "max_steps", "timeout"
+    event: str = ""
+    """"", "centred", "lost", "not_found", "recovery", "refinement", "stall", "max_steps", "timeout"."""
     stop_threshold_px: float | None = None  # ε − the stopping margin: what `centred` was tested against
+    detections: tuple[Detection, ...] = ()  # everything the detector saw, strongest first
     timing: StepTiming = field(default_factory=lambda: StepTiming(0.0, 0.0, 0.0, 0.0, 0.0))
 
 

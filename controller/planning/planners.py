@@ -3,7 +3,8 @@
 - `LatentPlannerAdapter` (default): the paper's latent dynamics planner (Algorithm 1's
   inner loop): scores all 9 actions by the predicted distance to the goal prototype.
 - `ClassicPlanner`: the alternative the paper names: the detector's target centre →
-  a direction per axis, with a deadband; no learning.
+  a direction per axis, with a deadband; no learning. It picks its target among the
+  detections with the keyword parser (`controller.planning.grounding`).
 - `RandomPlanner`: a seeded baseline; one of the 8 moving actions uniformly.
 - `OraclePlanner`: the labelling rule applied to simulator truth. For judging only
   (the "steps over the oracle's" ratio); a real vehicle has no truth.
@@ -22,6 +23,7 @@ from typing import Protocol
 import numpy as np
 
 from controller.planning.actions import ALL_ACTIONS, Action, label_from_offset
+from controller.planning.grounding import parse_instruction, select_target
 from perception.types import Detection
 
 log = logging.getLogger(__name__)
@@ -39,18 +41,25 @@ class Observation:
 
     image: np.ndarray  # RGB uint8 (H, W, 3)
     detection: Detection | None
+    """The named target's detection, as the loop chose it (`CentringConfig.target`)."""
     instruction: str
     epsilon_px: float
     stop_threshold_px: float | None = None
     """Where the loop stops, per detector: ε − its stopping margin (None: ε)."""
+    detections: tuple[Detection, ...] = ()
+    """Everything the detector saw, strongest first (empty: only `detection` is known)."""
 
     @property
     def offset_px(self) -> tuple[float, float] | None:
         """The detected target centre minus the image centre (du, dv), None when nothing was detected."""
-        if self.detection is None:
+        return self.offset_of(self.detection)
+
+    def offset_of(self, detection: Detection | None) -> tuple[float, float] | None:
+        """`detection`'s centre minus the image centre (du, dv), None for None."""
+        if detection is None:
             return None
         height, width = self.image.shape[:2]
-        return self.detection.centre_px[0] - width / 2.0, self.detection.centre_px[1] - height / 2.0
+        return detection.centre_px[0] - width / 2.0, detection.centre_px[1] - height / 2.0
 
 
 @dataclass(frozen=True)
@@ -101,6 +110,10 @@ class LatentPlannerAdapter:
 class ClassicPlanner:
     """Detector bounding box → direction, per axis, with a deadband (no learning).
 
+    Its target is its own reading of the instruction: `parse_instruction` (keywords)
+    then `select_target` among `observation.detections`, so an instruction that avoids
+    the lexicon's words falls back to the strongest detection, whatever it is (an honest
+    baseline). With no detections listed it steers to `observation.detection`.
     Moves on an axis only when the detected centre lies more than `deadband_px`
     from the image centre on it; `deadband_px` None uses the loop's stop threshold
     (ε less the stopping margin), so the classic pipeline stops moving exactly where
@@ -115,9 +128,12 @@ class ClassicPlanner:
         self.deadband_px = deadband_px
 
     def plan(self, observation: Observation) -> Plan:
-        offset = observation.offset_px
+        target = observation.detection
+        if observation.detections:
+            target = select_target(observation.detections, parse_instruction(observation.instruction))
+        offset = observation.offset_of(target)
         if offset is None:
-            log.warning("classic planner called without a detection: choosing no move")
+            log.warning("classic planner: no detection of the instructed target: choosing no move")
             return Plan(ALL_ACTIONS[4])
         deadband = self.deadband_px
         if deadband is None:

@@ -1,0 +1,143 @@
+"""The centring loop with several targets in view: it centres the named one, or ends `target_not_found`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from fake_vehicle import FakeVehicle
+from mission_fakes import IMAGE_SIZE, PX_PER_M, FakeCamera, FakePlanner
+
+from controller.missions.schema import Expectations
+from controller.planning.actions import ALL_ACTIONS, label_from_offset
+from controller.planning.grounding import TargetQuery
+from controller.planning.loop import CentringConfig, CentringLoop, Outcome
+from controller.planning.planners import ClassicPlanner, Observation
+from perception.types import Detection
+
+EPSILON = 10.0
+
+
+@dataclass(frozen=True)
+class WallTarget:
+    kind: str
+    attribute: str
+    east_m: float  # right of the centred pose's target
+    up_m: float
+    confidence: float
+
+
+class FakeMultiTargetDetector:
+    """Several targets on the fake wall seen from the fake vehicle (pinhole, `PX_PER_M`), strongest first.
+
+    `gone_after` (call number) hides every target from then on: a target seen, then lost.
+    """
+
+    def __init__(
+        self, vehicle: FakeVehicle, targets: list[WallTarget], gone_after: int | None = None
+    ) -> None:
+        self.vehicle = vehicle
+        self.targets = targets
+        self.gone_after = gone_after
+        self.calls = 0
+
+    def detect_all(self, image: np.ndarray) -> list[Detection]:
+        call, self.calls = self.calls, self.calls + 1
+        if self.gone_after is not None and call >= self.gone_after:
+            return []
+        found = []
+        for t in self.targets:
+            u = IMAGE_SIZE / 2 + (t.east_m - self.vehicle.east_m) * PX_PER_M
+            v = IMAGE_SIZE / 2 + (self.vehicle.up_m - t.up_m) * PX_PER_M
+            if 0 <= u < IMAGE_SIZE and 0 <= v < IMAGE_SIZE:
+                box = (u - 10, v - 10, u + 10, v + 10)
+                found.append(Detection(box, (u, v), t.confidence, t.kind, t.attribute))
+        return sorted(found, key=lambda d: -d.confidence)
+
+    def detect(self, image: np.ndarray) -> Detection | None:
+        found = self.detect_all(image)
+        return found[0] if found else None
+
+
+GAUGE = WallTarget("gauge", "blue", 0.0, 0.0, 0.95)  # the strongest, centred at the start pose
+RED_VALVE = WallTarget("valve", "red", 0.6, 0.2, 0.7)  # 58 px right, 19 px above
+YELLOW_VALVE = WallTarget("valve", "yellow", -0.6, -0.2, 0.8)
+
+
+def run(instruction: str, targets: list[WallTarget], target: TargetQuery | None = None, **kw) -> tuple:
+    vehicle = FakeVehicle.at_pose()
+    detector = FakeMultiTargetDetector(vehicle, targets, kw.pop("gone_after", None))
+    planner = kw.pop("planner", ClassicPlanner())
+    config = CentringConfig(epsilon_px=EPSILON, instruction=instruction, target=target, **kw)
+    loop = CentringLoop(vehicle, FakeCamera(), detector, planner, config)
+    return loop.run(), vehicle
+
+
+def test_centres_the_named_target_not_the_strongest_one_already_centred() -> None:
+    result, vehicle = run("centre the red valve", [GAUGE, RED_VALVE, YELLOW_VALVE])
+    assert result.outcome is Outcome.CENTRED
+    assert result.steps[0].centred is False  # the gauge is centred, but the gauge was not asked for
+    assert len(result.steps[0].detections) == 3 and result.steps[0].detection.attribute == "red"
+    assert vehicle.east_m == pytest.approx(0.6, abs=EPSILON / PX_PER_M)
+    assert vehicle.up_m == pytest.approx(0.2, abs=EPSILON / PX_PER_M)
+    assert result.steps[0].action.direction() == (1, 1)  # right and up: towards the red valve
+
+
+def test_the_attribute_tells_two_valves_apart_and_the_gauge_is_centred_at_once() -> None:
+    result, vehicle = run("center the yellow handwheel", [GAUGE, RED_VALVE, YELLOW_VALVE])
+    assert result.outcome is Outcome.CENTRED
+    assert vehicle.east_m == pytest.approx(-0.6, abs=EPSILON / PX_PER_M)
+    gauge, vehicle = run("center the gauge", [GAUGE, RED_VALVE, YELLOW_VALVE])
+    assert gauge.outcome is Outcome.CENTRED and gauge.moves == 0 and vehicle.moves_commanded == 0
+
+
+def test_the_configured_query_overrides_the_instruction() -> None:
+    def towards_the_loops_choice(seen: Observation) -> int:  # steers to `detection`, as a learned planner may
+        du, dv = seen.offset_px
+        return ALL_ACTIONS.index(label_from_offset(du, dv, seen.stop_threshold_px))
+
+    query = TargetQuery("valve", "red")
+    planner = FakePlanner(towards_the_loops_choice)
+    result, vehicle = run("center the gauge", [GAUGE, RED_VALVE], target=query, planner=planner)
+    assert result.outcome is Outcome.CENTRED and result.steps[0].detection.kind == "valve"
+    assert vehicle.east_m == pytest.approx(0.6, abs=EPSILON / PX_PER_M)
+
+
+@pytest.mark.parametrize("instruction", ["centre the switch box", "centre the blue valve"])
+def test_an_absent_target_ends_not_found_without_a_single_move(instruction: str) -> None:
+    result, vehicle = run(instruction, [GAUGE, RED_VALVE], not_found_rereads=3)
+    assert result.outcome is Outcome.TARGET_NOT_FOUND
+    assert vehicle.moves_commanded == 0 and result.moves == 0
+    assert all(c.is_zero() for c in vehicle.commands)  # holding only: no moving velocity setpoint
+    assert (vehicle.east_m, vehicle.up_m) == (0.0, 0.0)
+    assert len(result.steps) == 4 and all(s.event == "not_found" and s.action is None for s in result.steps)
+    asked = "switchbox" if "switch" in instruction else "blue valve"
+    assert result.message == f"no {asked} in view; saw: gauge (blue), valve (red)"
+
+
+def test_a_target_seen_then_gone_is_lost_not_not_found() -> None:
+    result, _ = run("centre the red valve", [GAUGE, RED_VALVE], gone_after=2, lost_recoveries=0)
+    assert result.outcome is Outcome.TARGET_LOST
+    assert result.steps[0].detection is not None and result.steps[-1].event == "lost"
+
+
+def test_classic_planner_steers_to_the_named_detection_and_falls_back_to_the_strongest() -> None:
+    gauge = Detection((30, 100, 50, 120), (40.0, 110.0), 0.95, "gauge", "blue")  # left, strongest
+    valve = Detection((170, 100, 190, 120), (180.0, 110.0), 0.6, "valve", "red")  # right
+    image = np.zeros((IMAGE_SIZE, IMAGE_SIZE, 3), np.uint8)
+
+    def direction(instruction: str) -> tuple[int, int]:
+        seen = Observation(image, None, instruction, EPSILON, 8.0, (gauge, valve))
+        return ClassicPlanner().plan(seen).action.direction()
+
+    assert direction("centre the valve") == (1, 0)
+    assert direction("centre the red wheel") == (1, 0)
+    assert direction("centre the gauge") == (-1, 0)
+    assert direction("centre the spinny thing") == (-1, 0)  # no lexicon word: the strongest detection
+    alone = Observation(image, valve, "centre the gauge", EPSILON, 8.0)  # no list: the loop's choice
+    assert ClassicPlanner().plan(alone).action.direction() == (1, 0)
+
+
+def test_mission_expectations_accept_target_not_found() -> None:
+    assert Expectations(outcome="target_not_found").outcome == Outcome.TARGET_NOT_FOUND.value

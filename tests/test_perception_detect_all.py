@@ -1,0 +1,119 @@
+"""Every target in a frame: `ImageDetector.detect_all` (kinds, NMS, attributes) on rendered scenes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from core.targets import ATTRIBUTE_COLOURS, colour_name
+from perception.attributes import read_attribute
+from perception.detector_model import CentreNet, DetectorConfig
+from perception.image_detector import ImageDetector
+from sim_world.world import World
+
+SEEDS = range(200, 216)  # scenes never used to tune the attribute reader's bands
+
+
+@pytest.fixture(scope="module")
+def detector() -> ImageDetector:
+    torch.set_num_threads(1)
+    return ImageDetector.shipped()
+
+
+def centred_render(seed: int, distance_m: float = 2.0) -> tuple[np.ndarray, str, str]:
+    """(rgb, kind, trim colour name) of scene `seed` seen head-on with its target in the middle."""
+    with World(seed=seed) as world:
+        world.teleport(*world.scene.pose_for_offset(0.0, 0.0, distance_m, 0.0))
+        rgb = world.render(with_seg=False).rgb
+        return rgb, world.scene.target_kind, colour_name(world.scene.sampled.target.bezel_colour)
+
+
+@pytest.fixture(scope="module")
+def renders() -> dict[int, tuple[np.ndarray, str, str]]:
+    return {seed: centred_render(seed, 1.6 + 0.1 * (seed % 10)) for seed in SEEDS}
+
+
+def test_detect_all_finds_the_single_target_with_its_kind_and_agrees_with_detect(
+    detector: ImageDetector, renders: dict[int, tuple[np.ndarray, str, str]]
+) -> None:
+    for rgb, kind, _ in renders.values():
+        found = detector.detect_all(rgb)
+        strongest = detector.detect(rgb)
+        assert len(found) == 1, found  # one object: no second peak, no second kind on it
+        assert found[0].kind == kind
+        assert strongest is not None and strongest.attribute is None  # detect() reads no attribute
+        assert found[0].centre_px == strongest.centre_px and found[0].confidence == strongest.confidence
+        assert found[0].bbox_px == strongest.bbox_px
+
+
+def test_attribute_reader_names_the_trim_colour(
+    detector: ImageDetector, renders: dict[int, tuple[np.ndarray, str, str]]
+) -> None:
+    right = sum(detector.detect_all(rgb)[0].attribute == colour for rgb, _, colour in renders.values())
+    assert len({c for _, _, c in renders.values()}) >= 4  # the scenes show most trim colours
+    assert right >= len(renders) - 2, right  # measured 95 of 100 on held-out scenes
+
+
+def test_two_renders_side_by_side_give_two_detections_of_their_kinds(detector: ImageDetector) -> None:
+    kinds: dict[str, tuple[np.ndarray, str]] = {}
+    for seed in range(200, 260):
+        rgb, kind, colour = centred_render(seed)
+        kinds.setdefault(kind, (rgb, colour))
+        if len(kinds) == 3:
+            break
+    (left_rgb, left_colour), (right_rgb, right_colour) = kinds["valve"], kinds["gauge"]
+    image = np.ascontiguousarray(np.concatenate([left_rgb[:, 56:168], right_rgb[:, 56:168]], axis=1))
+    found = detector.detect_all(image)
+    assert len(found) == 2, found
+    by_kind = {d.kind: d for d in found}
+    assert set(by_kind) == {"valve", "gauge"}
+    assert by_kind["valve"].centre_px[0] == pytest.approx(56, abs=4)
+    assert by_kind["gauge"].centre_px[0] == pytest.approx(168, abs=4)
+    assert by_kind["valve"].attribute == left_colour and by_kind["gauge"].attribute == right_colour
+    assert found[0].confidence >= found[1].confidence
+    batch = detector.detect_all_batch([image, left_rgb])
+    assert [(d.kind, d.attribute) for d in batch[0]] == [(d.kind, d.attribute) for d in found]
+    assert batch[0][0].centre_px == pytest.approx(found[0].centre_px, abs=1e-3)  # batched float sums differ
+    assert [d.kind for d in batch[1]] == ["valve"]
+
+
+def test_read_attribute_on_synthetic_trim() -> None:
+    """A ring of each palette colour on a brick-red wall with a white dial; a frame on a grey wall."""
+    yy, xx = np.mgrid[0:64, 0:64]
+    r = np.hypot(xx + 0.5 - 32, yy + 0.5 - 32)
+    for name, rgb in ATTRIBUTE_COLOURS.items():
+        image = np.empty((64, 64, 3), np.uint8)
+        image[:] = (150, 70, 50)
+        image[r < 14] = rgb
+        image[r < 11] = (245, 242, 235)
+        assert read_attribute(image, (18.0, 18.0, 46.0, 46.0), "gauge") == name
+        box = np.empty((64, 64, 3), np.uint8)
+        box[:] = (120, 120, 118)
+        box[16:48, 20:44] = rgb
+        box[18:46, 22:42] = (240, 238, 230)
+        assert read_attribute(box, (20.0, 16.0, 44.0, 48.0), "switchbox") == name
+    assert read_attribute(np.zeros((8, 8, 3), np.uint8), (3.0, 3.0, 3.5, 3.5), "gauge") is None
+
+
+def test_decoding_keeps_each_local_peak_once_and_drops_another_kind_on_the_same_object() -> None:
+    """A hand-made head output: a gauge peak with a weaker valve peak 1 cell away, a switch box elsewhere."""
+    detector = ImageDetector(CentreNet(DetectorConfig()))
+    grid, k = detector.config.grid_size, len(detector.config.kinds)
+    out = torch.zeros(1, k + 6, grid, grid)
+    out[:, :k] = -8.0  # sigmoid ≈ 0 everywhere
+    out[0, 0, 20, 10], out[0, 0, 20, 11] = 3.0, 2.0  # gauge peak and its shoulder (not a local maximum)
+    out[0, 1, 21, 11] = 2.5  # valve, one cell off the gauge: inside its box, the same object
+    out[0, 2, 40, 45] = 1.0  # switch box, far away
+    out[0, 2, 40, 47] = 0.5  # its second peak, inside its box
+    out[0, 1, 5, 50] = -1.0  # a valve below the score threshold
+    out[0, k + 2 : k + 6] = float(np.log(12.0 / 16.0))  # every box 12 px each way
+    detector._model = lambda x: out.expand(x.shape[0], -1, -1, -1)  # the network stubbed by its output
+    found = detector.detect_all(np.full((224, 224, 3), 128, np.uint8))
+    assert [d.kind for d in found] == ["gauge", "switchbox"]
+    assert found[0].centre_px == pytest.approx((40.0, 80.0)) and found[0].confidence == pytest.approx(
+        0.9526, abs=1e-4
+    )
+    assert found[1].centre_px == pytest.approx((180.0, 160.0))
+    single = detector.detect(np.full((224, 224, 3), 128, np.uint8))
+    assert single is not None and single.centre_px == found[0].centre_px
