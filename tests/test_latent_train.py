@@ -100,6 +100,13 @@ def test_grounded_training_plans_toward_the_target_the_words_name(tmp_path: Path
     ev = evaluate_checkpoint(tmp_path / "run", data, "heldout")
     assert ev.presence is not None and ev.presence["auroc"] >= 0.8, ev.presence
     assert set(ev.by_targets_in_view) == {"2"}
+    phrases = tmp_path / "operators.txt"
+    phrases.write_text(
+        "gauge: bring the pressure dial to the middle\nvalve: centre the valve wheel\n"
+        "switchbox: line up on the control box\n"
+    )
+    by_phrase = evaluate_checkpoint(tmp_path / "run", data, str(phrases))
+    assert by_phrase.n == 120 and by_phrase.rank1 >= 0.6, by_phrase.rank1
 
 
 def label_index(offset: tuple[float, float], eps: float) -> int:
