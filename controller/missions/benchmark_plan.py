@@ -178,7 +178,7 @@ def instruction_for(mission: Mission, corpus: str, absent: bool) -> str:
     scene = sample_scene(scene_config_for(mission), seed)
     targets = [(t.kind, colour_name(t.bezel_colour)) for t in scene.targets]
     if absent:
-        name = _absent_name(targets, _draw(seed, 2))
+        name = _absent_name(targets, _draw(seed, 2), with_colour=mission.twins)
     else:
         kind, attribute = targets[0]
         repeats = mission.twins or any(k == kind for k, _ in targets[1:])
@@ -186,13 +186,16 @@ def instruction_for(mission: Mission, corpus: str, absent: bool) -> str:
     return describe(name, builtin_templates(corpus), corpus, _draw(seed, 1))
 
 
-def _absent_name(targets: list[tuple[str, str]], rng: np.random.Generator) -> TargetName:
-    """A kind no target has (by kind alone), else a kind with a colour no target of it has."""
+def _absent_name(targets: list[tuple[str, str]], rng: np.random.Generator, with_colour: bool) -> TargetName:
+    """A kind no target has (by kind alone; with a colour too where `with_colour`: a twins mission's
+    instruction always names one), else a kind with a colour no target of it has."""
     rng.random()  # the draw that chose "absent"
     kinds = {kind for kind, _ in targets}
     missing = [k for k in TARGET_KINDS if k not in kinds]
     if missing:
-        return TargetName(missing[int(rng.integers(len(missing)))])
+        kind = missing[int(rng.integers(len(missing)))]
+        colours = tuple(ATTRIBUTE_COLOURS)
+        return TargetName(kind, colours[int(rng.integers(len(colours)))] if with_colour else None)
     kind = TARGET_KINDS[int(rng.integers(len(TARGET_KINDS)))]
     free = [c for c in ATTRIBUTE_COLOURS if (kind, c) not in targets]
     return TargetName(kind, free[int(rng.integers(len(free)))])
