@@ -2,10 +2,13 @@
 
     dronectl benchmark-missions --n 200 --seed 1 --json runs/bench_missions.json
     dronectl benchmark-missions --n 20 --seed 1 --vehicle sim-mavlink --planner latent --parallel 2
+    dronectl benchmark-missions --n 50 --targets 3 --twins --absent 0.2 --instructions heldout
 
 Prints success rate, mean steps, mean steps over the oracle's, final offset, the
-loop's boundary refinement moves and loop overhead per planner; --json writes the
-same plus every mission's row.
+loop's boundary refinement moves, loop overhead and wrong-target centrings (the loop
+stopped on another target, per truth; in-process sim only) per planner, and with
+--absent how many absent-target missions ended target_not_found and how many moved;
+--json writes the same plus every mission's row.
 """
 
 from __future__ import annotations
@@ -90,6 +93,25 @@ def main(argv: list[str]) -> int:
     parser.add_argument(
         "--fixed-moves", action="store_true", help="the paper's fixed move lengths instead of scaled ones"
     )
+    parser.add_argument(
+        "--targets", type=int, default=1, help="targets in every scene, the named one included (1..4)"
+    )
+    parser.add_argument(
+        "--twins", action="store_true", help="one other target of the named kind, in another trim colour"
+    )
+    parser.add_argument(
+        "--instructions",
+        choices=("train", "heldout"),
+        help="the phrases naming the target (default: heldout with --targets/--twins/--absent, "
+        "else 'center the <kind>')",
+    )
+    parser.add_argument(
+        "--absent",
+        type=float,
+        default=0.0,
+        help="fraction of missions whose instruction names a target not in the scene "
+        "(they must end target_not_found)",
+    )
     faults = parser.add_argument_group("injected faults (sim-mavlink and px4-sitl; gusts also sim)")
     faults.add_argument(
         "--link-loss", type=float, default=0.0, help="fraction of MAVLink datagrams lost, each way"
@@ -143,7 +165,8 @@ def main(argv: list[str]) -> int:
             checkpoint=args.checkpoint, detector=args.detector, parallel=args.parallel,
             detector_checkpoint=args.detector_checkpoint, scale_moves=not args.fixed_moves,
             px4_dir=args.px4, px4_speed=_speed(args.px4_speed), faults=faults_from_args(args),
-            rerun=args.rerun, ray=args.ray,
+            rerun=args.rerun, ray=args.ray, targets=args.targets, twins=args.twins,
+            instructions=args.instructions, absent=args.absent,
         )  # fmt: skip
         if config.vehicle == "px4-sitl":  # a missing PX4 folder is named before anything flies
             config = replace(config, px4_dir=str(find_px4_dir(config.px4_dir)))

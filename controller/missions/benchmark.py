@@ -1,18 +1,16 @@
 """Randomised centring missions from unseen scene seeds, planners side by side.
 
-Mission i of a benchmark with seed S flies scene seed `scene_seed(S, i)` (31-bit,
-drawn from `SeedSequence([S, i])`; the training scenes are drawn the same way from
-the dataset seed, so the chance of meeting one is ~1e-5, and seeds a checkpoint
-lists as seen in training are skipped), a random target kind, and a random start
-with the target anywhere in `view_fraction` of the half view, at a random
-distance and yaw. Every planner flies the same missions.
+The missions (unseen scenes, random starts, several targets, absent targets) are
+`controller.missions.benchmark_plan`'s; every planner flies the same ones.
 
 Per planner: success rate (centred per truth within ε, within the step budget),
 mean steps over its successes, its mean steps over the oracle's on the missions
 both solved (a ratio of means), final truth offset (mean, p95, max), the loop's
 boundary refinement moves (flown when the planner chose "no move" just outside
 the stop threshold: total, and missions that needed one), and the loop's overhead
-per step (everything but the move).
+per step (everything but the move). Several targets: wrong-target centrings (the
+loop stopped, but per truth on another target; never a success) in their own
+column. Absent-target missions count apart: ended `target_not_found` / flew a move.
 """
 
 from __future__ import annotations
@@ -22,110 +20,22 @@ import logging
 import statistics
 import tempfile
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from tqdm import tqdm
 
+from controller.missions.benchmark_plan import ABSENT_TAG, BenchmarkConfig, benchmark_missions
 from controller.missions.kits.base import LoadedModels
 from controller.missions.report import REPORT_JSON, claim_report_dir
 from controller.missions.results import MissionResult
-from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission, PortSpec, parse_mission
-from controller.missions.suite import UDP_PORTS_PER_MISSION, failed_to_start
+from controller.missions.schema import Mission
+from controller.missions.suite import failed_to_start
 from core.parallel import gather, task_executor
 from flight.safety import SafetyLimits
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class BenchmarkConfig:
-    """What to fly. `vehicle`: `sim` (in-process), `sim-mavlink` (sim-vehicle + MAVSDK + MJPEG) or
-    `px4-sitl` (real PX4 SITL flying the world, lockstep, `px4_speed` "max" by default)."""
-
-    n: int = 200
-    seed: int = 0
-    planners: tuple[str, ...] = ("latent", "classic", "random", "oracle")
-    vehicle: str = SIM
-    max_steps: int = 20
-    epsilon_px: float | None = None
-    view_fraction: tuple[float, float] = (0.1, 0.85)
-    distance_m: tuple[float, float] = (1.5, 3.0)
-    yaw_deg: tuple[float, float] = (-10.0, 10.0)
-    checkpoint: str | None = None
-    detector: str = "image"
-    """`image` (what the product uses) or `truth` (in-process only: isolates the planners from detection)."""
-    detector_checkpoint: str | None = None
-    """The image detector's run folder; None: its shipped weights."""
-    scale_moves: bool = True
-    """The loop's move scheme: scaled with the detector's offset (default) or the paper's fixed lengths."""
-    parallel: int = 1
-    udp_port_base: int = 15400  # 15400-15479: clear of the tests' fixed ports (146xx-150xx)
-    http_port_base: int = 19400
-    px4_dir: str | None = None
-    """PX4 SITL build folder for `px4-sitl` (None: $PX4_SITL_DIR)."""
-    px4_speed: float | str = "max"
-    faults: dict[str, Any] | None = None
-    """Injected faults, the `faults:` section of a mission file (seeded per mission by its scene seed)."""
-    ray: str | None = None
-    """Run the missions on Ray: "local" (a private local Ray of `parallel` CPUs) or a cluster's address."""
-    rerun: bool = False
-    """Record each mission as `mission.rrd` in its report folder (needs a report folder to keep)."""
-
-    def __post_init__(self) -> None:
-        if self.n < 1 or self.parallel < 1:
-            raise ValueError("n and parallel must be >= 1")
-        if self.vehicle not in (SIM, SIM_MAVLINK, PX4_SITL):
-            raise ValueError(
-                f"vehicle must be {SIM!r}, {SIM_MAVLINK!r} or {PX4_SITL!r}, got {self.vehicle!r}"
-            )
-        unknown = set(self.planners) - {"latent", "classic", "random", "oracle"}
-        if unknown or not self.planners:
-            raise ValueError(f"planners must be among latent, classic, random, oracle; got {self.planners}")
-
-
-def scene_seed(seed: int, index: int) -> int:
-    return int(np.random.SeedSequence([seed, index, 0xBE7C]).generate_state(1)[0] >> 1)
-
-
-def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozenset[int]) -> list[Mission]:
-    """The `n` missions for one planner (the same scenes and starts for every planner)."""
-    missions, index = [], 0
-    while len(missions) < config.n:
-        seed = scene_seed(config.seed, index)
-        index += 1
-        if seed in skip_seeds:
-            continue
-        slot = len(missions) % 20
-        missions.append(
-            parse_mission({
-                "name": f"bench-{config.seed}-{len(missions):04d}-{planner}",
-                "tags": ["benchmark"],
-                "scene": {"seed": seed},
-                "start": {"random": {
-                    "seed": seed, "view_fraction": list(config.view_fraction),
-                    "distance_m": list(config.distance_m), "yaw_deg": list(config.yaw_deg),
-                }},
-                "vehicle": config.vehicle,
-                "planner": planner,
-                "checkpoint": config.checkpoint,
-                "detector": config.detector,
-                "epsilon_px": config.epsilon_px,
-                "max_steps": config.max_steps,
-                "loop": {"scale_moves": config.scale_moves},
-                "expect": {"outcome": "centred", "max_steps": config.max_steps},
-                "ports": PortSpec(
-                    mavlink_udp=config.udp_port_base + UDP_PORTS_PER_MISSION * slot,
-                    http=config.http_port_base + slot,
-                ).model_dump(),
-                **({"px4": {"dir": config.px4_dir, "speed": config.px4_speed, "keep_ulog": False}}
-                   if config.vehicle == PX4_SITL else {}),
-                **({"faults": {**config.faults, "seed": seed}} if config.faults else {}),
-            })
-        )  # fmt: skip
-    return missions
 
 
 def _load_models(config: BenchmarkConfig) -> LoadedModels:
@@ -222,7 +132,9 @@ def summarise(config: BenchmarkConfig, results: list[MissionResult], wall_s: flo
     oracle = _by_index(results, "oracle")
     planners: dict[str, Any] = {}
     for planner in config.planners:
-        rows = _by_index(results, planner)
+        every = _by_index(results, planner)
+        rows = {key: r for key, r in every.items() if ABSENT_TAG not in r.tags}
+        absent = [r for r in every.values() if ABSENT_TAG in r.tags]
         ok = [r for r in rows.values() if r.passed]
         errors = [r.final_truth_error_px for r in rows.values() if r.final_truth_error_px is not None]
         both = [key for key, r in rows.items() if r.passed and key in oracle and oracle[key].passed]
@@ -243,8 +155,14 @@ def summarise(config: BenchmarkConfig, results: list[MissionResult], wall_s: flo
             "overhead_ms_mean": statistics.fmean(overhead) if overhead else None,
             "refinement_moves": sum(r.refinement_moves for r in rows.values()),
             "missions_with_refinement": sum(r.refinement_moves > 0 for r in rows.values()),
+            "wrong_target": sum(r.wrong_target for r in rows.values()),
+            "absent": {
+                "missions": len(absent),
+                "not_found": sum(r.outcome == "target_not_found" for r in absent),
+                "wandered": sum(r.moves > 0 for r in absent),
+            },
             "outcomes": {
-                o: sum(r.outcome == o for r in rows.values()) for o in {r.outcome for r in rows.values()}
+                o: sum(r.outcome == o for r in every.values()) for o in {r.outcome for r in every.values()}
             },
         }
     summary = {
@@ -323,6 +241,13 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"budget {cfg['max_steps']} steps, {'scaled' if cfg.get('scale_moves', True) else 'fixed'} moves, "
         f"{summary['wall_s']:.0f} s",
     ]
+    if cfg.get("targets", 1) > 1 or cfg.get("twins") or cfg.get("absent"):
+        corpus = cfg.get("instructions") or "heldout"
+        lines.append(
+            f"{cfg.get('targets', 1)} targets per scene{', with a twin' if cfg.get('twins') else ''}; "
+            f"instructions from the {corpus} phrases; "
+            f"{100 * cfg.get('absent', 0.0):.0f}% name an absent target"
+        )
     if "px4_ready_sim_s" in summary:
         r = summary["px4_ready_sim_s"]
         lines.append(
@@ -341,9 +266,11 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"wall, {n['over_timeout']} over the timeout, "
             f"{len(limits['reports_incomplete'])} reports incomplete"
         )
+    any_absent = any(p.get("absent", {}).get("missions") for p in summary["planners"].values())
     lines.append(
         f"{'planner':<8} {'success':>15} {'mean steps':>10} {'/oracle':>8} {'offset px mean/p95/max':>23} "
-        f"{'refinement moves':>16} {'overhead ms':>11}"
+        f"{'refinement moves':>16} {'overhead ms':>11} {'wrong target':>12}"
+        + (f" {'absent: not found/wandered':>26}" if any_absent else "")
     )
     for name, p in summary["planners"].items():
         refinements = f"{p['refinement_moves']} in {p['missions_with_refinement']}"
@@ -353,6 +280,12 @@ def format_summary(summary: dict[str, Any]) -> str:
         lines.append(
             f"{name:<8} {p['successes']:>5}/{p['missions']:<4} {100 * p['success_rate']:>5.1f}% "
             f"{num(p['mean_steps'], '.2f'):>10} {num(p['mean_steps_over_oracle'], '.2f'):>8} {offsets:>23} "
-            f"{refinements:>16} {num(p['overhead_ms_mean'], '.1f'):>11}"
+            f"{refinements:>16} {num(p['overhead_ms_mean'], '.1f'):>11} {p.get('wrong_target', 0):>12}"
+            + (f" {_absent_cell(p['absent']):>26}" if any_absent else "")
         )
     return "\n".join(lines)
+
+
+def _absent_cell(absent: dict[str, int]) -> str:
+    """ "4/5, 1 moved": absent-target missions that ended target_not_found, and those that flew a move."""
+    return f"{absent['not_found']}/{absent['missions']}, {absent['wandered']} moved"

@@ -41,6 +41,8 @@ class MissionResult:
     info: dict[str, Any] = field(default_factory=dict)
     vehicle_clock_s: dict[str, float] = field(default_factory=dict)
     files: dict[str, str | None] = field(default_factory=dict)
+    wrong_target: bool = False
+    """The loop ended centred, but per truth another target (not the named one) was within ε."""
     truth_extremes: dict[str, Any] | None = None
     """Simulated MAVLink vehicles: the largest speeds and excursions from home per simulator truth."""
     """What the report folder holds: report, trajectory, gif, tlog (None: not written)."""
@@ -63,6 +65,32 @@ def count_steps(steps: list[StepRecord]) -> int:
     return sum(1 for s in steps if s.action is not None or s.event == "recovery")
 
 
+def wrong_target(
+    outcome: Outcome,
+    epsilon_px: float,
+    final_truth_offset_px: tuple[float, float] | None,
+    targets_truth: list[tuple[float, float] | None] | None,
+) -> int | None:
+    """A wrong-target centring: the loop ended `centred`, the named target is not within ε per truth,
+    and another target is. Returns that target's index in the scene (the named one is 0), else None.
+
+    `targets_truth`: every target's true offset at the end, the named one first (None: no such truth,
+    e.g. a kit other than the in-process sim); its first entry is not used (`final_truth_offset_px`
+    judges the named one, as for success)."""
+    if outcome is not Outcome.CENTRED or not targets_truth:
+        return None
+    if final_truth_offset_px is not None and _error_px(final_truth_offset_px) <= epsilon_px:
+        return None
+    for index, offset in enumerate(targets_truth[1:], start=1):
+        if offset is not None and _error_px(offset) <= epsilon_px:
+            return index
+    return None
+
+
+def _error_px(offset: tuple[float, float]) -> float:
+    return max(abs(offset[0]), abs(offset[1]))
+
+
 def judge(
     mission: Mission,
     outcome: Outcome,
@@ -71,10 +99,16 @@ def judge(
     final_truth_offset_px: tuple[float, float] | None,
     final_detector_offset_px: tuple[float, float] | None,
     has_truth: bool,
+    wrong_target_index: int | None = None,
 ) -> list[str]:
-    """Every expectation of `mission` that the flight broke, in words; empty when it passed."""
+    """Every expectation of `mission` that the flight broke, in words; empty when it passed.
+    `wrong_target_index`: see `wrong_target` (a wrong-target centring never passes)."""
     expect = mission.expect
     failures: list[str] = []
+    if wrong_target_index is not None:
+        failures.append(
+            f"wrong target centred: target {wrong_target_index} is within ε per truth, not the named one"
+        )
     if outcome.value != expect.outcome:
         failures.append(f"outcome {outcome.value}, expected {expect.outcome}")
     final = final_truth_offset_px if has_truth else final_detector_offset_px

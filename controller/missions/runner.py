@@ -28,8 +28,9 @@ from pathlib import Path
 
 from controller.missions.kits.base import FlightKit, LoadedModels
 from controller.missions.report import REPORT_JSON, ReportWriter, claim_report_dir, write_setup_failure
-from controller.missions.results import MissionResult, count_steps, judge
+from controller.missions.results import MissionResult, count_steps, judge, wrong_target
 from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission
+from controller.planning.grounding import TargetQuery
 from controller.planning.loop import CentringLoop
 from controller.planning.loop_records import CentringConfig, Outcome, StepRecord, count_refinements
 from core.centring import default_epsilon_px
@@ -46,10 +47,13 @@ def epsilon_for(mission: Mission, kit: FlightKit) -> float:
     return kit.epsilon_px or mission.epsilon_px or default_epsilon_px(kit.image_width_px)
 
 
-def loop_config(mission: Mission, epsilon_px: float, instruction: str) -> CentringConfig:
+def loop_config(
+    mission: Mission, epsilon_px: float, instruction: str, target: TargetQuery | None = None
+) -> CentringConfig:
     return CentringConfig(
         epsilon_px=epsilon_px,
         instruction=instruction,
+        target=target,
         max_steps=mission.max_steps,
         timeout_s=mission.timeout_s,
         stop_margin_px=mission.stop_margin_px,
@@ -88,7 +92,7 @@ def fly_kit(
         kit.camera,
         kit.detector,
         kit.planner,
-        loop_config(mission, kit.epsilon_px, kit.instruction),
+        loop_config(mission, kit.epsilon_px, kit.instruction, kit.target),
         truth_probe=kit.truth_probe,
     )
     loop.stop_threshold_px(kit.image_width_px)  # ε against the stopping margin: checked before takeoff
@@ -102,6 +106,7 @@ def fly_kit(
     outcome, message, error = Outcome.ABORTED, "", None
     vehicle_start_s = vehicle_end_s = 0.0
     clock: dict[str, float] = {}  # milestones on the vehicle's clock (PX4 SITL's: simulated time)
+    targets_truth: list[tuple[float, float] | None] | None = None  # every target, when the loop ended
     try:
         vehicle.connect()
         clock["connected_s"] = vehicle.time_s()
@@ -111,6 +116,7 @@ def fly_kit(
             vehicle_start_s = vehicle.time_s()
             result = loop.run()
             outcome, message = result.outcome, result.message
+            targets_truth = kit.targets_truth() if kit.targets_truth is not None else None
             vehicle_end_s = vehicle.time_s()
             vehicle.stop_offboard()
             vehicle.land()
@@ -127,7 +133,7 @@ def fly_kit(
             recorder.finish(outcome.value, message)
         mission_result = _finish(
             kit, mission, writer, loop, outcome, message, error, time.perf_counter() - wall_start,
-            max(0.0, vehicle_end_s - vehicle_start_s), clock,
+            max(0.0, vehicle_end_s - vehicle_start_s), clock, targets_truth,
         )  # fmt: skip
     return mission_result
 
@@ -153,14 +159,17 @@ def _finish(
     wall_s: float,
     vehicle_s: float,
     clock: dict[str, float],
+    targets_truth: list[tuple[float, float] | None] | None,
 ) -> MissionResult:
     steps = loop.steps
     final_truth = steps[-1].truth_offset_px if steps else None
     final_detector = steps[-1].offset_px if steps else None
     n_steps = count_steps(steps)
+    wrong = wrong_target(outcome, kit.epsilon_px, final_truth, targets_truth)
     failures = judge(
-        mission, outcome, n_steps, kit.epsilon_px, final_truth, final_detector, kit.truth_probe is not None
-    )
+        mission, outcome, n_steps, kit.epsilon_px, final_truth, final_detector, kit.truth_probe is not None,
+        wrong,
+    )  # fmt: skip
     if error is not None:
         failures.insert(0, f"error: {error}")
     summary = {
@@ -173,6 +182,9 @@ def _finish(
         "refinement_moves": count_refinements(steps),
         "stop_threshold_px": steps[-1].stop_threshold_px if steps else None,
         "final_offset_px": {"truth": final_truth, "detector": final_detector},
+        "wrong_target": wrong is not None,
+        "wrong_target_index": wrong,
+        "targets_truth_final_px": targets_truth,
         "wall_s": round(wall_s, 3),
         "vehicle_s": round(vehicle_s, 3),
         "vehicle_clock_s": {name: round(value, 3) for name, value in clock.items()},
@@ -202,6 +214,7 @@ def _finish(
         vehicle_clock_s=summary["vehicle_clock_s"],
         files=final["files"],
         truth_extremes=summary["truth_extremes"],
+        wrong_target=wrong is not None,
     )
 
 

@@ -10,9 +10,12 @@ name: sector-ne                  # required; used for the report folder
 tags: [sector, quick]
 scene: {seed: 1001}              # or {config: scenes/x.yaml, seed: 3}, or {config: {...inline...}, seed: 3}
 target_kind: gauge               # gauge | valve | switchbox | null (the scene draws one)
+targets: 1                       # 1..4 targets on the wall, the named one included
+twins: false                     # one other target of the named kind, in another trim colour (targets >= 2)
+target_attribute: null           # the named target's trim colour: black | grey | red | blue | yellow | null
 start: {right_m: -0.5, up_m: -0.4, distance_m: 2.0, yaw_deg: 0}   # drone pose relative to the centred pose
 # start: {random: {seed: 7, view_fraction: [0.2, 0.8], distance_m: [1.6, 2.6], yaw_deg: [-8, 8]}}
-instruction: center the gauge
+instruction: center the gauge     # null: "center the <kind>", "center the <colour> <kind>" with twins
 vehicle: sim                     # sim | sim-mavlink | px4-sitl | a MAVLink URL (udpin://0.0.0.0:14540, serial:///dev/ttyACM0:57600)
 camera: sim                      # sim | a stream URL (http://host:8080/stream.mjpg, rtsp://...)
 planner: latent                  # latent | classic | random | oracle
@@ -50,7 +53,10 @@ from pydantic import (
     model_validator,
 )
 
+from controller.missions.schema_specs import FaultSpec, PortSpec, Px4Spec
+from controller.planning.grounding import parse_instruction
 from core.config_files import ConfigFileError, Range, StrictModel, read_yaml, validate_mapping
+from core.targets import ATTRIBUTE_COLOURS
 from flight.errors import ConnectionUrlError
 from flight.urls import validate_connection_url
 
@@ -191,79 +197,6 @@ class Expectations(StrictModel):
     """The final truth offset, max(|du|, |dv|), must not exceed this."""
 
 
-class PortSpec(StrictModel):
-    """Ports for a `sim-mavlink` mission (the suite assigns distinct ones to parallel missions)."""
-
-    mavlink_udp: int = Field(default=14840, ge=1024, le=65535)
-    http: int = Field(default=18840, ge=1024, le=65535)
-
-
-class Px4Spec(StrictModel):
-    """How a `px4-sitl` mission runs PX4 SITL (see `sim_world.px4_bridge`)."""
-
-    dir: str | None = None
-    """PX4 SITL build folder; None: the `--px4` option, else $PX4_SITL_DIR."""
-    instance: int | Literal["auto"] = "auto"
-    """PX4 instance 0..9 (ports 4560+N, 14540+N); "auto": the lowest one no other run holds."""
-    speed: float | Literal["max"] = 1.0
-    """Simulated seconds per wall second, or "max" (lockstep as fast as it goes; benchmarks)."""
-    noise: float = Field(default=1.0, gt=0.0, le=10.0)
-    """Scale of every sensor noise and bias (PX4 refuses perfectly constant sensors: > 0)."""
-    keep_ulog: bool = True
-    """Copy PX4's .ulg flight log into the report folder (`px4/`); ~4 MB per 20 s."""
-    params: dict[str, float] = Field(default_factory=dict)
-    """PX4 parameters set at boot (`MPC_XY_VEL_MAX: 1.0`)."""
-
-    @field_validator("instance")
-    @classmethod
-    def _instance_range(cls, value: int | str) -> int | str:
-        if isinstance(value, int) and not 0 <= value <= 9:
-            raise ValueError(f"must be 0..9 or 'auto', got {value}")
-        return value
-
-    @field_validator("speed")
-    @classmethod
-    def _speed_range(cls, value: float | str) -> float | str:
-        if isinstance(value, float) and not 0.05 <= value <= 100.0:
-            raise ValueError(f"must be in [0.05, 100] or 'max', got {value:g}")
-        return value
-
-
-class LinkFaultSpec(StrictModel):
-    """A bad MAVLink link between the controller and the vehicle (see `flight.link_faults`)."""
-
-    loss: float = Field(default=0.0, ge=0.0, lt=1.0)
-    latency_ms: float = Field(default=0.0, ge=0.0, le=5000.0)
-    jitter_ms: float = Field(default=0.0, ge=0.0, le=5000.0)
-    duplicate: float = Field(default=0.0, ge=0.0, lt=1.0)
-    reorder: float = Field(default=0.0, ge=0.0, lt=1.0)
-
-
-class CameraFaultSpec(StrictModel):
-    """A bad camera at its source (`sim_world.rendering.video.VideoFaults`); times: simulated s from boot."""
-
-    drop: float = Field(default=0.0, ge=0.0, lt=1.0)
-    freeze_at_s: float | None = Field(default=None, ge=0.0)
-    freeze_for_s: float = Field(default=3.0, gt=0.0)
-    dies_at_s: float | None = Field(default=None, ge=0.0)
-
-
-class FaultSpec(StrictModel):
-    """Faults injected on purpose, to see how a mission degrades; all off by default."""
-
-    link: LinkFaultSpec | None = None
-    camera: CameraFaultSpec | None = None
-    gust_m_s: float = Field(default=0.0, ge=0.0, le=10.0)
-    """Gusts (the wind's standard deviation per axis, m/s) in a simulated world."""
-    vehicle_dies_at_s: float | None = Field(default=None, ge=0.0)
-    """The simulated vehicle (sim-vehicle, or PX4 itself) is killed at this simulated time from boot."""
-    seed: int = Field(default=0, ge=0)
-
-    @property
-    def any(self) -> bool:
-        return bool(self.link or self.camera or self.gust_m_s or self.vehicle_dies_at_s is not None)
-
-
 class Mission(StrictModel):
     """One centring mission."""
 
@@ -272,9 +205,16 @@ class Mission(StrictModel):
     description: str = ""
     scene: SceneSpec = SceneSpec()
     target_kind: TargetKindName | None = None
+    targets: int = Field(default=1, ge=1, le=4)
+    """Targets on the wall, the named one (the one to centre) included."""
+    twins: bool = False
+    """One other target has the named target's kind, in another trim colour (needs targets >= 2)."""
+    target_attribute: str | None = None
+    """The named target's trim colour (a name of `core.targets.ATTRIBUTE_COLOURS`); None: drawn."""
     start: Start = StartOffset()
     instruction: str | None = None
-    """None: "center the <target kind>"."""
+    """None: resolved from the built scene, "center the <kind>" ("center the <colour> <kind>" when the
+    colour tells the named target apart: twins, or a `target_attribute`)."""
     vehicle: str = SIM
     camera: str = SIM
     planner: PlannerName = "latent"
@@ -295,6 +235,34 @@ class Mission(StrictModel):
     ports: PortSpec = PortSpec()
     px4: Px4Spec = Px4Spec()
     faults: FaultSpec = FaultSpec()
+
+    @field_validator("target_attribute")
+    @classmethod
+    def _known_colour(cls, value: str | None) -> str | None:
+        if value is not None and value not in ATTRIBUTE_COLOURS:
+            raise ValueError(f"must be one of {', '.join(ATTRIBUTE_COLOURS)} or null, got {value!r}")
+        return value
+
+    @model_validator(mode="after")
+    def _named_target(self) -> Mission:
+        """Twins need a second target, and an instruction that tells the twins apart by colour."""
+        if self.twins and self.targets < 2:
+            raise ValueError(
+                f"twins: needs targets >= 2 (the named one and its twin), got targets {self.targets}"
+            )
+        if self.instruction is not None and (self.twins or self.target_attribute is not None):
+            named = parse_instruction(self.instruction).attribute
+            if named is None and self.twins:
+                raise ValueError(
+                    f"instruction: {self.instruction!r} names no colour, but the scene has twins "
+                    "(two targets of one kind): say which, e.g. 'center the red gauge'"
+                )
+            if self.target_attribute is not None and named not in (None, self.target_attribute):
+                raise ValueError(
+                    f"instruction: {self.instruction!r} names {named}, but target_attribute is "
+                    f"{self.target_attribute}"
+                )
+        return self
 
     @model_validator(mode="after")
     def _links(self) -> Mission:
@@ -363,8 +331,20 @@ class Mission(StrictModel):
             update["start"] = RandomStartSpec(random=self.start.random.model_copy(update={"seed": seed}))
         return self.model_copy(update=update)
 
-    def instruction_text(self, target_kind: str | None) -> str:
-        return self.instruction or f"center the {target_kind or 'target'}"
+    @property
+    def names_colour(self) -> bool:
+        """Whether a resolved instruction names the target's colour (twins, or a `target_attribute`)."""
+        return self.twins or self.target_attribute is not None
+
+    def instruction_text(
+        self, target_kind: str | None, attribute: str | None = None, kind_repeats: bool = False
+    ) -> str:
+        """The instruction, or one resolved from the built scene's named target: its kind, and its trim
+        colour `attribute` where `names_colour` or another target has the same kind (`kind_repeats`)."""
+        if self.instruction:
+            return self.instruction
+        colour = f"{attribute} " if attribute and (self.names_colour or kind_repeats) else ""
+        return f"center the {colour}{target_kind or 'target'}"
 
 
 _UNNAMED = ("fixed-start", "random-start")  # the `start` union's tags: not fields

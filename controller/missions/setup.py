@@ -10,11 +10,21 @@ from dataclasses import replace
 
 from controller.missions.schema import Mission, RandomStartSpec, StartOffset
 from sim_world.physics.wind import WindConfig
-from sim_world.scene.config import DEFAULT_SCENE, SceneConfig, load_scene_config, parse_scene_config
+from sim_world.scene.config import (
+    DEFAULT_SCENE,
+    SceneConfig,
+    load_scene_config,
+    parse_scene_config,
+    with_targets,
+)
 
 
 def scene_config_for(mission: Mission) -> SceneConfig:
-    """The mission's scene family (file, inline or default), restricted to its target kind."""
+    """The mission's scene family (file, inline or default), restricted to its target kind, with the
+    mission's `targets` (exactly that many), `twins` and the named target's `target_attribute`.
+
+    A mission with one target, no twins and no attribute keeps the scene file's own `target.count` and
+    `twins` (a `scenes/multi.yaml` mission still draws 2-4 targets)."""
     spec = mission.scene.config
     if spec is None:
         config = DEFAULT_SCENE
@@ -25,6 +35,14 @@ def scene_config_for(mission: Mission) -> SceneConfig:
     if mission.target_kind is not None:
         target = config.target.model_copy(update={"kinds": (mission.target_kind,)})
         config = config.model_copy(update={"target": target})
+    if mission.targets != 1 or mission.twins or mission.target_attribute is not None:
+        config = with_targets(
+            config,
+            count=(mission.targets, mission.targets) if mission.targets != 1 else None,
+            twins=mission.twins or None,
+            attribute=mission.target_attribute,
+            source=f"mission {mission.name}: targets/twins/target_attribute over its scene",
+        )
     return config
 
 

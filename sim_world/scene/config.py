@@ -91,6 +91,9 @@ class TargetConfig(StrictModel):
     """Choices for the other targets' kinds (kinds not yet on the wall are preferred)."""
     twins: bool = False
     """With 2 or more targets: one other target has the named target's kind, in another trim colour."""
+    attribute: str | None = None
+    """The named target's trim colour name (`core.targets.ATTRIBUTE_COLOURS`): its trim is drawn from
+    the `bezel_colours` of that name (that colour itself if none has it); None: from all of them."""
     count: IntRange = (1, 1)
     """How many targets on the wall (named one included), 1..4. Last, so that its check sees the rest."""
 
@@ -119,6 +122,22 @@ class TargetConfig(StrictModel):
                     f"{kind} leaves {pairs} other (kind, colour) pair(s) in other_kinds and bezel_colours"
                 )
         return value
+
+    @field_validator("attribute")
+    @classmethod
+    def _attribute_name(cls, value: str | None) -> str | None:
+        if value is not None and value not in vocabulary.ATTRIBUTE_COLOURS:
+            raise ValueError(
+                f"must be one of {', '.join(vocabulary.ATTRIBUTE_COLOURS)} or null, got {value!r}"
+            )
+        return value
+
+    def named_bezel_colours(self) -> tuple[str, ...]:
+        """The trim colours the named target is drawn from (see `attribute`)."""
+        if self.attribute is None:
+            return self.bezel_colours
+        named = tuple(c for c in self.bezel_colours if vocabulary.colour_name(c) == self.attribute)
+        return named or ("#{:02x}{:02x}{:02x}".format(*vocabulary.ATTRIBUTE_COLOURS[self.attribute]),)
 
     @field_validator("size_m")
     @classmethod
@@ -229,15 +248,22 @@ def parse_scene_config(data: object, source: str | Path = "<scene config>") -> S
 
 
 def with_targets(
-    config: SceneConfig, count: tuple[int, int] | None = None, twins: bool | None = None
+    config: SceneConfig,
+    count: tuple[int, int] | None = None,
+    twins: bool | None = None,
+    attribute: str | None = None,
+    source: str = "<command line>",
 ) -> SceneConfig:
-    """`config` with `target.count` and/or `target.twins` replaced, validated as a file would be."""
+    """`config` with `target.count`, `.twins` and/or `.attribute` replaced (None: kept), validated as a
+    file would be; errors name `source`."""
     data = config.model_dump(mode="json")
     if count is not None:
         data["target"]["count"] = list(count)
     if twins is not None:
         data["target"]["twins"] = twins
-    return parse_scene_config(data, "<command line>")
+    if attribute is not None:
+        data["target"]["attribute"] = attribute
+    return parse_scene_config(data, source)
 
 
 def load_scene_config(path: str | Path) -> SceneConfig:

@@ -125,7 +125,7 @@ def sample_target(
         east_m=uniform(rng, cfg.east_m),
         height_m=height,
         dial_colour=str(pick(rng, cfg.dial_colours)),
-        bezel_colour=str(pick(rng, cfg.bezel_colours)) if bezel_colour is None else bezel_colour,
+        bezel_colour=str(pick(rng, cfg.named_bezel_colours())) if bezel_colour is None else bezel_colour,
         needle_fraction=needle_fraction,
         gauge_scale=int(rng.integers(0, len(GAUGE_SCALES))),
         red_zone=bool(rng.random() < 0.6),

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from controller.missions.schema import Mission
+from controller.planning.grounding import TargetQuery
 from controller.planning.loop_records import TruthProbe
 from controller.planning.planners import Planner, make_planner
 from flight.link_faults import LinkFaults
@@ -47,6 +48,28 @@ class FlightKit:
     """Judging only: the simulator's largest speeds and excursions from home over the flight."""
     epsilon_px: float | None = None
     """ε when the kit fixes it (tests); None: the mission's, else `default_epsilon_px(image_width_px)`."""
+    target: TargetQuery | None = None
+    """The loop's target (`CentringConfig.target`); None: the instruction's own parse (real vehicles)."""
+    targets_truth: Callable[[], list[tuple[float, float] | None]] | None = None
+    """Judging only: every target's true offset in pixels now (None: out of view), the named one first;
+    None where the kit cannot tell (only the in-process sim can: wrong-target judging)."""
+
+
+def named_target(mission: Mission, targets: list[tuple[str, str]]) -> tuple[str, TargetQuery | None]:
+    """The instruction and the loop's target for a simulated scene whose targets are `targets`
+    ((kind, trim colour name), the named one first).
+
+    A mission that gives its instruction keeps it, and the loop reads its target from the words (as
+    on a real vehicle: a mission naming a kind the scene lacks ends `target_not_found`). Otherwise
+    the instruction is resolved from the scene (the colour included where the kind alone would not
+    say which), and the loop's target is the named target's kind and that colour, from the scene
+    itself rather than through the lexicon."""
+    kind, attribute = targets[0]
+    repeats = any(other_kind == kind for other_kind, _ in targets[1:])
+    text = mission.instruction_text(kind, attribute, kind_repeats=repeats)
+    if mission.instruction:
+        return text, None
+    return text, TargetQuery(kind, attribute if (mission.names_colour or repeats) else None)
 
 
 @dataclass

@@ -16,7 +16,13 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from typing import Any
 
-from controller.missions.kits.base import FlightKit, LoadedModels, image_detector_for, planner_for
+from controller.missions.kits.base import (
+    FlightKit,
+    LoadedModels,
+    image_detector_for,
+    named_target,
+    planner_for,
+)
 from controller.missions.schema import Mission, StartOffset
 from controller.missions.setup import scene_config_for, start_offset_for, wind_config_for
 from flight.pybullet_backend import PyBulletVehicle
@@ -68,6 +74,10 @@ class SimWorld:
     def truth_offset(self) -> tuple[float, float] | None:
         return truth_offset(self.world)
 
+    def targets_truth(self) -> list[tuple[float, float] | None]:
+        """Judging only: every target's true offset (None: out of view), the named one first."""
+        return [t.offset_px if t.in_view else None for t in self.world.targets_truth()]
+
 
 @contextmanager
 def open_sim_world(
@@ -96,19 +106,25 @@ def open_sim_kit(
     with open_sim_world(mission, limits, with_seg=mission.detector == "truth") as sim:
         world = sim.world
         planner = planner_for(mission, models, sim.truth_offset)
+        targets = [(t.kind, t.attribute) for t in world.scene.targets]
+        instruction, target = named_target(mission, targets)
         info: dict[str, Any] = {
             "backend": "in-process PyBullet",
             "scene_seed": mission.scene.seed,
             "target_kind": world.scene.target_kind,
             "start": sim.start.model_dump(),
         }
+        if len(targets) > 1 or mission.names_colour:
+            info["targets"] = [{"kind": kind, "attribute": attribute} for kind, attribute in targets]
         yield FlightKit(
             vehicle=sim.vehicle,
             camera=sim.camera,
             detector=sim_detector(mission, world, sim.camera, models),
             planner=planner,
-            instruction=mission.instruction_text(world.scene.target_kind),
+            instruction=instruction,
+            target=target,
             truth_probe=sim.truth_offset,
+            targets_truth=sim.targets_truth,
             place_at_start=sim.place_at_start,
             info=info,
             image_width_px=world.config.camera.width,

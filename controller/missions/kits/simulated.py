@@ -14,9 +14,16 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
-from controller.missions.kits.base import FlightKit, LoadedModels, image_detector_for, planner_for
+from controller.missions.kits.base import (
+    FlightKit,
+    LoadedModels,
+    image_detector_for,
+    named_target,
+    planner_for,
+)
 from controller.missions.schema import Mission, StartOffset
 from controller.missions.setup import scene_config_for, wind_config_for
+from core.targets import colour_name
 from flight.mavsdk_backend import MavsdkVehicle
 from perception.stream_camera import StreamCamera
 from sim_world.rendering.camera import CameraConfig
@@ -104,7 +111,11 @@ def simulated_mavlink_kit(
 ) -> FlightKit:
     """The kit of a simulated vehicle flown over MAVLink (sim-vehicle, PX4 SITL): it starts landed below
     the mission's start pose, so the takeoff climbs to the pose's height; truth judges, never flies."""
-    target = sample_scene(scene, mission.scene.seed).target  # numbers only: the simulator's own draw
+    sampled = sample_scene(scene, mission.scene.seed)  # numbers only: the simulator's own draw
+    target = sampled.target
+    instruction, query = named_target(
+        mission, [(t.kind, colour_name(t.bezel_colour)) for t in sampled.targets]
+    )
     climb_m = target.height_m + start.up_m - truth.ground_height_m()
     if climb_m < PX4_MIN_TAKEOFF_ALT_M:
         log.warning(
@@ -117,7 +128,8 @@ def simulated_mavlink_kit(
         camera=camera,
         detector=image_detector_for(mission, models),
         planner=planner,
-        instruction=mission.instruction_text(target.kind),
+        instruction=instruction,
+        target=query,
         truth_probe=truth.offset_px,
         truth_extremes=truth.extremes,
         takeoff_altitude_m=climb_m,

@@ -1,0 +1,83 @@
+"""The mission file's sections about where and how a simulated or relayed flight runs: ports, PX4
+SITL, injected faults (`controller.missions.schema` re-exports them)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, field_validator
+
+from core.config_files import StrictModel
+
+
+class PortSpec(StrictModel):
+    """Ports for a `sim-mavlink` mission (the suite assigns distinct ones to parallel missions)."""
+
+    mavlink_udp: int = Field(default=14840, ge=1024, le=65535)
+    http: int = Field(default=18840, ge=1024, le=65535)
+
+
+class Px4Spec(StrictModel):
+    """How a `px4-sitl` mission runs PX4 SITL (see `sim_world.px4_bridge`)."""
+
+    dir: str | None = None
+    """PX4 SITL build folder; None: the `--px4` option, else $PX4_SITL_DIR."""
+    instance: int | Literal["auto"] = "auto"
+    """PX4 instance 0..9 (ports 4560+N, 14540+N); "auto": the lowest one no other run holds."""
+    speed: float | Literal["max"] = 1.0
+    """Simulated seconds per wall second, or "max" (lockstep as fast as it goes; benchmarks)."""
+    noise: float = Field(default=1.0, gt=0.0, le=10.0)
+    """Scale of every sensor noise and bias (PX4 refuses perfectly constant sensors: > 0)."""
+    keep_ulog: bool = True
+    """Copy PX4's .ulg flight log into the report folder (`px4/`); ~4 MB per 20 s."""
+    params: dict[str, float] = Field(default_factory=dict)
+    """PX4 parameters set at boot (`MPC_XY_VEL_MAX: 1.0`)."""
+
+    @field_validator("instance")
+    @classmethod
+    def _instance_range(cls, value: int | str) -> int | str:
+        if isinstance(value, int) and not 0 <= value <= 9:
+            raise ValueError(f"must be 0..9 or 'auto', got {value}")
+        return value
+
+    @field_validator("speed")
+    @classmethod
+    def _speed_range(cls, value: float | str) -> float | str:
+        if isinstance(value, float) and not 0.05 <= value <= 100.0:
+            raise ValueError(f"must be in [0.05, 100] or 'max', got {value:g}")
+        return value
+
+
+class LinkFaultSpec(StrictModel):
+    """A bad MAVLink link between the controller and the vehicle (see `flight.link_faults`)."""
+
+    loss: float = Field(default=0.0, ge=0.0, lt=1.0)
+    latency_ms: float = Field(default=0.0, ge=0.0, le=5000.0)
+    jitter_ms: float = Field(default=0.0, ge=0.0, le=5000.0)
+    duplicate: float = Field(default=0.0, ge=0.0, lt=1.0)
+    reorder: float = Field(default=0.0, ge=0.0, lt=1.0)
+
+
+class CameraFaultSpec(StrictModel):
+    """A bad camera at its source (`sim_world.rendering.video.VideoFaults`); times: simulated s from boot."""
+
+    drop: float = Field(default=0.0, ge=0.0, lt=1.0)
+    freeze_at_s: float | None = Field(default=None, ge=0.0)
+    freeze_for_s: float = Field(default=3.0, gt=0.0)
+    dies_at_s: float | None = Field(default=None, ge=0.0)
+
+
+class FaultSpec(StrictModel):
+    """Faults injected on purpose, to see how a mission degrades; all off by default."""
+
+    link: LinkFaultSpec | None = None
+    camera: CameraFaultSpec | None = None
+    gust_m_s: float = Field(default=0.0, ge=0.0, le=10.0)
+    """Gusts (the wind's standard deviation per axis, m/s) in a simulated world."""
+    vehicle_dies_at_s: float | None = Field(default=None, ge=0.0)
+    """The simulated vehicle (sim-vehicle, or PX4 itself) is killed at this simulated time from boot."""
+    seed: int = Field(default=0, ge=0)
+
+    @property
+    def any(self) -> bool:
+        return bool(self.link or self.camera or self.gust_m_s or self.vehicle_dies_at_s is not None)
