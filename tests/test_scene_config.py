@@ -106,3 +106,15 @@ def test_empty_file_is_the_default(tmp_path: Path) -> None:
     path = tmp_path / "empty.yaml"
     path.write_text("# nothing set\n")
     assert load_scene_config(path) == DEFAULT_SCENE
+
+
+def test_the_wide_training_family_keeps_the_held_out_look_out() -> None:
+    """scenes/train_wide.yaml may widen the default family, never into the held-out look's paint or light."""
+    root = Path(__file__).resolve().parents[1] / "scenes"
+    wide, held = load_scene_config(root / "train_wide.yaml"), load_scene_config(root / "heldout_look.yaml")
+    assert not set(wide.wall.colours) & set(held.wall.colours)
+    assert not set(wide.floor.colours) & set(held.floor.colours)
+    lo, hi = wide.lighting.azimuth_deg
+    held_lo, held_hi = held.lighting.azimuth_deg
+    assert held_hi < lo or hi < held_lo, (wide.lighting.azimuth_deg, held.lighting.azimuth_deg)
+    assert wide.target.bezel_colours == held.target.bezel_colours  # the words name these in both
