@@ -14,8 +14,9 @@ false-positive rate is at most `max_fp_rate`; of the thresholds with that recall
 middle one (margin both ways: against false alarms above, against missed weak targets
 below, as the test sample will not score exactly as the validation one).
 
-Scores come from a detector run at a low floor threshold: its strongest detection does not depend on the threshold, so re-thresholding
-afterwards gives exactly what a detector built with that threshold returns.
+Scores come from a detector run at a low floor threshold: its strongest detection does
+not depend on the threshold, so re-thresholding afterwards gives exactly what a detector
+built with that threshold returns.
 """
 
 from __future__ import annotations
