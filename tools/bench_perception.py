@@ -41,18 +41,34 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, default=300, help="frames timed for the detector latency")
     p.add_argument("--stream-frames", type=int, default=100, help="frames timed through the stream (0: skip)")
     p.add_argument("--seed", type=int, default=1234, help="seed of the sim scene of the stream benchmark")
-    p.add_argument("--work-dir", type=Path, default=None,
-                   help="keep the rendered samples here, reused by the next run (default: a temp folder)")
-    p.add_argument("--data", type=Path, default=None,
-                   help="score this dataset's test and empty splits instead of rendering the test sample")
+    p.add_argument(
+        "--work-dir",
+        type=Path,
+        default=None,
+        help="keep the rendered samples here, reused by the next run (default: a temp folder)",
+    )
+    p.add_argument(
+        "--data",
+        type=Path,
+        default=None,
+        help="score this dataset's test and empty splits instead of rendering the test sample",
+    )
     p.add_argument("--test", type=int, default=d.test, help="test images with the target in view")
     p.add_argument("--test-empty", type=int, default=d.test_empty, help="empty test images")
     p.add_argument("--validation", type=int, default=d.validation, help="validation images with the target")
     p.add_argument("--validation-empty", type=int, default=d.validation_empty, help="empty validation images")
-    p.add_argument("--max-fp-rate", type=float, default=0.005,
-                   help="false-positive rate the tuned threshold may reach on validation")
-    p.add_argument("--targets", type=target_count, default=None,
-                   help="also measure recall over every target in scenes of N (or LO-HI) targets")
+    p.add_argument(
+        "--max-fp-rate",
+        type=float,
+        default=0.005,
+        help="false-positive rate the tuned threshold may reach on validation",
+    )
+    p.add_argument(
+        "--targets",
+        type=target_count,
+        default=None,
+        help="also measure recall over every target in scenes of N (or LO-HI) targets",
+    )
     p.add_argument("--multi", type=int, default=d.multi, help="images of the several-target sample")
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes rendering the samples")
     return p  # fmt: skip
