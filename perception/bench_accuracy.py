@@ -54,7 +54,7 @@ class AccuracySampleSizes:
     """Images per sample (defaults: ≥ 1,000 test images with the target in view, ≥ 300 empty)."""
 
     test: int = 1200
-    test_empty: int = 320
+    test_empty: int = 400
     validation: int = 500
     validation_empty: int = 500
     multi: int = 300
