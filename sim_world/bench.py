@@ -199,7 +199,9 @@ def run_sim_bench(settings: SimBenchSettings) -> dict[str, Any]:
     config = WorldConfig(camera=CameraConfig(width=settings.camera_size_px, height=settings.camera_size_px))
     choice = choose_render_mode(
         settings.render_mode,
-        lambda: calibrate(config, settings.seed, 2.0, settings.camera_hz, settings.render_workers),
+        lambda: calibrate(
+            config, settings.seed, camera_hz=settings.camera_hz, workers=settings.render_workers
+        ),
     )
     physics = measure_flight_rtf(settings, camera="none")
     camera = measure_flight_rtf(settings, camera="single")

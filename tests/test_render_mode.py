@@ -7,7 +7,7 @@ import logging
 import pytest
 
 from sim_world.rendering.camera import CameraConfig
-from sim_world.rendering.render_mode import CameraFeed, choose_render_mode, hover_rtf
+from sim_world.rendering.render_mode import CameraFeed, calibrate, choose_render_mode, hover_rtf
 from sim_world.world import World, WorldConfig
 
 
@@ -17,7 +17,11 @@ def _never() -> dict[str, float]:
 
 @pytest.mark.parametrize(
     ("rtf", "expected"),
-    [({"single": 2.1, "workers": 3.4}, "workers"), ({"single": 2.1, "workers": 1.2}, "single")],
+    [
+        ({"single": 2.1, "workers": 3.4}, "workers"),
+        ({"single": 2.1, "workers": 1.2}, "single"),
+        ({"single": 2.1, "workers": 2.15}, "single"),  # within the 5 % margin: the simpler mode
+    ],
 )
 def test_auto_keeps_the_faster_mode(rtf: dict[str, float], expected: str, caplog) -> None:
     with caplog.at_level(logging.INFO, logger="sim_world.rendering.render_mode"):
@@ -47,3 +51,10 @@ def test_camera_feed_renders_every_camera_tick_in_both_modes() -> None:
                 assert feed.frames == 15 and rtf > 0.0  # 120 steps at 240 Hz, a frame every 8
     with pytest.raises(ValueError, match="render mode"):
         CameraFeed("auto", config, 3)
+
+
+@pytest.mark.timeout(180)
+def test_calibrate_measures_both_modes() -> None:
+    config = WorldConfig(camera=CameraConfig(width=64, height=64))
+    rtf = calibrate(config, 3, sim_s=0.25, rounds=2)
+    assert set(rtf) == {"single", "workers"} and all(v > 0.0 for v in rtf.values())
