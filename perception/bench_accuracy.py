@@ -56,7 +56,7 @@ class AccuracySampleSizes:
     test: int = 1200
     test_empty: int = 400
     validation: int = 500
-    validation_empty: int = 500
+    validation_empty: int = 1000
     multi: int = 300
     images_per_scene: int = 5
 

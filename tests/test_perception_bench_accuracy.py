@@ -95,6 +95,13 @@ def test_tiny_bench_writes_intervals_and_tunes_on_validation_only(tmp_path: Path
         assert acc[name]["false_positive_rate_empty"]["n"] == 6
         assert len(acc[name]["centre_error_median_px"]["ci95"]) == 2
     assert acc["test_at_shipped"]["threshold"] == 0.5
+    assert set(result["targets_met"]["test_at_tuned"]) >= {
+        "recall_ci95_low_ge_0.99",
+        "false_positive_ci95_high_le_0.01",
+    }
+    assert (
+        result["targets_met"]["test_at_shipped"]["false_positive_ci95_high_le_0.01"] is False
+    )  # 6 empties prove little
     assert {"mean_ms", "p50_ms", "p99_ms", "load_avg_before"} <= set(result["detector_latency_224"])
     test_rows = (tmp_path / "w" / "test" / "manifest.jsonl").read_text().splitlines()
     assert min(json.loads(r)["scene_seed"] for r in test_rows) >= TEST_FIRST_SEED

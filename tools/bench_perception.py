@@ -118,19 +118,35 @@ def format_accuracy(acc: dict[str, Any]) -> list[str]:
     return lines  # fmt: skip
 
 
-def targets_met(results: dict[str, Any]) -> dict[str, bool]:
-    """The issue's targets, judged on the test figures at the tuned threshold."""
-    acc = results["accuracy"]["test_at_tuned"]
-    met = {
+def _verdicts(met: dict[str, bool]) -> str:
+    return ", ".join(f"{k} {'yes' if v else 'NO'}" for k, v in met.items())
+
+
+def accuracy_targets(figures: dict[str, Any]) -> dict[str, bool]:
+    """The issue's accuracy targets on one threshold's test figures; `*_95` also by the interval's
+    far bound (the target met with 95 % confidence, what shipping a threshold asks for)."""
+    recall, fp = figures["recall_fully_in_view"], figures["false_positive_rate_empty"]
+    median, p95 = figures["centre_error_median_px"]["value"], figures["centre_error_p95_px"]["value"]
+    return {
+        "recall_fully_in_view_ge_0.99": recall["rate"] is not None and recall["rate"] >= RECALL_TARGET,
+        "recall_ci95_low_ge_0.99": recall["ci95"][0] >= RECALL_TARGET,
+        "false_positive_rate_empty_le_0.01": fp["rate"] is not None and fp["rate"] <= FP_TARGET,
+        "false_positive_ci95_high_le_0.01": fp["ci95"][1] <= FP_TARGET,
+        "centre_error_median_le_2px": median is not None and median <= 2.0,
+        "centre_error_p95_le_5px": p95 is not None and p95 <= 5.0,
+    }
+
+
+def targets_met(results: dict[str, Any]) -> dict[str, Any]:
+    """Latency targets, and the accuracy targets on test at the tuned and at the shipped threshold."""
+    met: dict[str, Any] = {
         "detector_p99_le_10ms": results["detector_latency_224"]["p99_ms"] <= DETECTOR_P99_TARGET_MS,
-        "recall_fully_in_view_ge_0.99": (acc["recall_fully_in_view"]["rate"] or 0.0) >= RECALL_TARGET,
-        "false_positive_rate_empty_le_0.01": (acc["false_positive_rate_empty"]["rate"] or 0.0) <= FP_TARGET,
-        "centre_error_median_le_2px": (acc["centre_error_median_px"]["value"] or 1e9) <= 2.0,
-        "centre_error_p95_le_5px": (acc["centre_error_p95_px"]["value"] or 1e9) <= 5.0,
     }
     if "stream" in results:
         stream_p99 = results["stream"]["render_to_frame_in_hand"]["p99_ms"]
         met["stream_p99_le_100ms"] = stream_p99 <= STREAM_TARGET_MS
+    for name in ("test_at_tuned", "test_at_shipped"):
+        met[name] = accuracy_targets(results["accuracy"][name])
     return met
 
 
@@ -183,12 +199,14 @@ def main(argv: list[str]) -> int:
     for line in format_accuracy(results["accuracy"]):
         print(line)
     met = results["targets_met"]
-    verdicts = ", ".join(f"{k} {'yes' if v else 'NO'}" for k, v in met.items())
-    print(f"targets met (test, tuned threshold): {verdicts}")
+    print("targets met (latency): " + _verdicts({k: v for k, v in met.items() if isinstance(v, bool)}))
+    for name in ("test_at_tuned", "test_at_shipped"):
+        print(f"targets met ({name.replace('_', ' ')}): " + _verdicts(met[name]))
     tuned, shipped = (results["accuracy"][k]["threshold"] for k in ("test_at_tuned", "test_at_shipped"))
-    if tuned != shipped and met["recall_fully_in_view_ge_0.99"] and met["false_positive_rate_empty_le_0.01"]:
+    if tuned != shipped and all(met["test_at_tuned"].values()):
         config = args.weights / "config.json"
-        print(f"to ship the tuned threshold: set detector.score_threshold to {tuned:.2f} in {config}")
+        print(f"the tuned threshold meets every target on test with 95 % confidence: to ship it, set "
+              f"detector.score_threshold to {tuned:.2f} in {config}")  # fmt: skip
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")
