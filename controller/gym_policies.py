@@ -12,7 +12,6 @@ starts and phrasings.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -24,6 +23,7 @@ import numpy as np
 from controller.gym_env import CentringEnv
 from controller.planning.actions import NUM_ACTIONS, label_from_offset
 from controller.planning.planners import LatentPlannerAdapter, Observation
+from core.stats import wilson_interval
 
 POLICIES = ("latent", "random", "oracle")
 Policy = Callable[[dict[str, Any], dict[str, Any]], int]
@@ -87,16 +87,6 @@ def run_policy(env: CentringEnv, name: str, policy: Policy, episodes: int, seed:
             )
         )  # fmt: skip
     return rows
-
-
-def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """The Wilson score interval of a success rate (95 % by default)."""
-    if n == 0:
-        return 0.0, 1.0
-    p = successes / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def summarise(rows: list[Episode], wall_s: float) -> dict[str, Any]:

@@ -5,8 +5,12 @@
 - Stream camera end to end: the simulated world renders a frame, the MJPEG server
   publishes it, a `StreamCamera` on the loopback URL hands it back; render time,
   publish → frame in hand, and the total (p50 / p99).
-- Accuracy on a dataset's held-out `test` split and its `empty` images (`--data`),
-  or on a small dataset collected on the spot into a temporary folder.
+- Accuracy on a large sample from unseen scenes (`perception.bench_accuracy`): the
+  score threshold tuned on a validation sample, the test figures at the tuned and the
+  shipped threshold, each with its 95 % interval; optionally recall over every target
+  of several-target scenes (`--targets`).
+
+The load average is printed beside the latencies: other work on the machine slows them.
 
 Prints a summary and, with `--json FILE`, writes every figure there.
 """
@@ -104,20 +108,8 @@ def bench_stream(seed: int, frames: int) -> dict[str, Any]:
     }
 
 
-def collect_small_dataset(out_dir: Path, seed: int) -> Path:
-    """A small held-out set: 90 test images (10 per class) and 30 empty ones."""
-    from sim_world.collection.collect import CollectConfig, collect
-
-    collect(
-        CollectConfig(
-            out_dir=out_dir, seed=seed, n_goal=1, n_per_sector=0, n_test=90, n_empty=30, images_per_scene=10
-        ),
-        progress=False,
-    )
-    return out_dir
-
-
-def _sample_images(data_dir: Path, count: int) -> list[np.ndarray]:
+def sample_images(data_dir: Path, count: int) -> list[np.ndarray]:
+    """The first `count` test and empty images of a dataset folder (latency inputs)."""
     from core.dataset import load_manifest
 
     rows, _ = load_manifest(data_dir)

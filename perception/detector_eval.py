@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +27,7 @@ from tqdm import tqdm
 
 from core.centring import default_epsilon_px, is_centred
 from core.dataset import DatasetError, load_manifest, read_image_rgb
+from core.stats import Rate, quantile_interval
 from perception.detector import Detector
 from perception.types import Detection
 
@@ -51,10 +52,35 @@ class DetectorMetrics:
     kind_accuracy: float
     n_centring: int
     centring_agreement: float
+    hits_fully_in_view: int = 0
+    n_false_positive_empty: int = 0
+    n_kind: int = 0
+    """Detections matched to a fully or partly visible target whose kind was judged."""
+    kind_hits: int = 0
+    centre_errors_px: tuple[float, ...] = field(default=(), repr=False)
+    """The centre error of every fully-in-view target detected at all (for the quantile intervals)."""
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values for JSON; an undefined figure (no rows of its kind) is None, not NaN."""
-        return {k: None if isinstance(v, float) and np.isnan(v) else v for k, v in asdict(self).items()}
+        values = asdict(self)
+        del values["centre_errors_px"]
+        return {k: None if isinstance(v, float) and np.isnan(v) else v for k, v in values.items()}
+
+    def intervals(self) -> dict[str, Any]:
+        """The rates with their 95 % Wilson intervals, the centre-error quantiles with theirs."""
+        return {
+            "recall_fully_in_view": Rate(self.hits_fully_in_view, self.n_fully_in_view).as_dict(),
+            "false_positive_rate_empty": Rate(self.n_false_positive_empty, self.n_empty).as_dict(),
+            "kind_accuracy": Rate(self.kind_hits, self.n_kind).as_dict(),
+            "centre_error_median_px": {
+                "value": _finite(self.centre_error_median_px),
+                "ci95": [_finite(x) for x in quantile_interval(self.centre_errors_px or [np.nan], 0.5)],
+            },
+            "centre_error_p95_px": {
+                "value": _finite(self.centre_error_p95_px),
+                "ci95": [_finite(x) for x in quantile_interval(self.centre_errors_px or [np.nan], 0.95)],
+            },
+        }
 
     def summary(self) -> str:
         return (
@@ -66,6 +92,10 @@ class DetectorMetrics:
             f"kind acc {self.kind_accuracy:.3f}, "
             f"centring agreement {self.centring_agreement:.4f} on {self.n_centring}"
         )
+
+
+def _finite(x: float) -> float | None:
+    return None if np.isnan(x) else float(x)
 
 
 def _rate(hits: int, total: int) -> float:
@@ -138,11 +168,16 @@ def evaluate_detections(
         kind_accuracy=_rate(kind_hits, kind_total),
         n_centring=n_centring,
         centring_agreement=_rate(agree, n_centring),
+        hits_fully_in_view=hits_full,
+        n_false_positive_empty=fp_empty,
+        n_kind=kind_total,
+        kind_hits=kind_hits,
+        centre_errors_px=tuple(errors_full),
     )
 
 
 def latency_ms(fn: Callable[[], object], repeats: int, warmup: int = 10) -> dict[str, float]:
-    """p50 / p90 / p99 / max wall time of `fn()` in milliseconds."""
+    """Mean, p50 / p90 / p99 and max wall time of `fn()` in milliseconds."""
     for _ in range(warmup):
         fn()
     times = np.empty(repeats)
@@ -152,6 +187,7 @@ def latency_ms(fn: Callable[[], object], repeats: int, warmup: int = 10) -> dict
         times[r] = time.perf_counter() - start
     times *= 1000.0
     return {
+        "mean_ms": float(times.mean()),
         "p50_ms": float(np.percentile(times, 50)),
         "p90_ms": float(np.percentile(times, 90)),
         "p99_ms": float(np.percentile(times, 99)),
@@ -160,14 +196,10 @@ def latency_ms(fn: Callable[[], object], repeats: int, warmup: int = 10) -> dict
     }
 
 
-def evaluate_on_dataset(
-    detector: Detector,
-    data_dir: str | Path,
-    splits: Sequence[str] = ("test", "empty"),
-    limit_per_split: int | None = None,
-    batch_size: int = 32,
-) -> DetectorMetrics:
-    """Run a detector on a dataset folder's images (in their own pixels) and score it.
+def select_rows(
+    data_dir: str | Path, splits: Sequence[str] = ("test", "empty"), limit_per_split: int | None = None
+) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """The rows to evaluate on and `dataset.json`.
 
     `empty` rows are taken only from test scene seeds (all of them, as `dronectl
     collect` plans them), so a training set's scenes never inflate the figures.
@@ -183,11 +215,36 @@ def evaluate_on_dataset(
         chosen += picked[:limit_per_split] if limit_per_split is not None else picked
     if not chosen:
         raise DatasetError(f"{root}: no rows in splits {list(splits)}")
+    return chosen, meta
+
+
+def run_detector(
+    detector: Detector, data_dir: str | Path, rows: Sequence[dict[str, Any]], batch_size: int = 32
+) -> list[Detection | None]:
+    """The detector's strongest detection (or None) on each row's image, in row order."""
+    root = Path(data_dir)
     detections: list[Detection | None] = []
     detect_batch = getattr(detector, "detect_batch", None)
-    for start in tqdm(range(0, len(chosen), batch_size), desc=f"evaluate {root.name}", leave=False):
-        images = [read_image_rgb(root / r["image"]) for r in chosen[start : start + batch_size]]
+    for start in tqdm(range(0, len(rows), batch_size), desc=f"evaluate {root.name}", leave=False):
+        images = [read_image_rgb(root / r["image"]) for r in rows[start : start + batch_size]]
         detections += detect_batch(images) if detect_batch else [detector.detect(im) for im in images]
+    return detections
+
+
+def image_size_and_epsilon(meta: dict[str, Any]) -> tuple[int, int, float]:
+    """(width, height, ε) of a dataset, from its `dataset.json`."""
     width, height = int(meta["camera"]["width"]), int(meta["camera"]["height"])
-    eps = float(meta.get("epsilon_px") or default_epsilon_px(width))
-    return evaluate_detections(chosen, detections, width, height, eps)
+    return width, height, float(meta.get("epsilon_px") or default_epsilon_px(width))
+
+
+def evaluate_on_dataset(
+    detector: Detector,
+    data_dir: str | Path,
+    splits: Sequence[str] = ("test", "empty"),
+    limit_per_split: int | None = None,
+    batch_size: int = 32,
+) -> DetectorMetrics:
+    """Run a detector on a dataset folder's images (in their own pixels) and score it (`select_rows`)."""
+    chosen, meta = select_rows(data_dir, splits, limit_per_split)
+    detections = run_detector(detector, data_dir, chosen, batch_size)
+    return evaluate_detections(chosen, detections, *image_size_and_epsilon(meta))

@@ -4,22 +4,28 @@ Measures, in order:
 - physics real-time factor without a camera: takeoff, then hover and body-velocity
   moves through the autopilot at the physics rate (240 Hz);
 - the same flight with the forward camera rendering at 30 Hz (224×224, noise on,
-  no segmentation mask, as a flight camera would);
+  no segmentation mask, as a flight camera would), in both render modes side by side
+  (`single`: inline; `workers`: two render processes), the load average before and
+  after each; and the mode `auto` picks on this machine now (`render_mode`);
 - render time per frame at 96, 128 and 224 px, with and without the mask (p50, p99);
 - collection throughput at 224 px with the default worker count.
 
 Timings share the CPU with whatever else runs: the load average is reported with
-them so that noisy numbers can be recognised as such.
+them so that noisy numbers can be recognised as such. `cpu_hogs` starts busy-looping
+processes for a measurement under load.
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import resource
+import subprocess
+import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,8 +34,10 @@ import numpy as np
 
 from sim_world.collection.collect import CollectConfig, collect
 from sim_world.rendering.camera import CameraConfig
-from sim_world.rendering.render_workers import RenderWorkers
+from sim_world.rendering.render_mode import CameraFeed, calibrate, choose_render_mode
 from sim_world.world import World, WorldConfig
+
+logger = logging.getLogger(__name__)
 
 TARGETS = {"physics_rtf": 20.0, "camera_rtf": 3.0, "collect_images_per_s": 50.0}
 """The targets of the project's issue for this 2-core machine."""
@@ -57,6 +65,8 @@ class SimBenchSettings:
     collect_images: int = 400
     collect_workers: int = os.cpu_count() or 1
     render_workers: int = 2
+    render_mode: str = "auto"
+    """What `choose_render_mode` is asked for (the bench measures both modes whatever it picks)."""
 
 
 def _fly(
@@ -89,39 +99,25 @@ def _airborne_world(config: WorldConfig, seed: int) -> World:
 
 
 def measure_flight_rtf(settings: SimBenchSettings, camera: str) -> dict[str, float]:
-    """Real-time factor of the scripted flight; camera: "none", "inline" or "workers".
+    """Real-time factor of the scripted flight; camera: "none", "single" (inline) or "workers".
 
     Also the factor by this process's CPU time, which other load on the machine hardly
-    changes: what an otherwise idle core would give (not meaningful for "workers").
+    changes: what an otherwise idle core would give (not meaningful for "workers"), and
+    the 1-minute load average before and after.
     """
     size = settings.camera_size_px
     config = WorldConfig(camera=CameraConfig(width=size, height=size))
-    frames = 0
+    load_before = os.getloadavg()[0]
     with _airborne_world(config, settings.seed) as world, contextlib.ExitStack() as stack:
         every = round(1.0 / (settings.camera_hz * world.dt_s)) if camera != "none" else None
-        if camera == "workers":
-            pool = stack.enter_context(RenderWorkers(config, settings.seed, settings.render_workers))
-
-            def tick(w: World) -> None:
-                nonlocal frames
-                if pool.outstanding == settings.render_workers:
-                    pool.collect()
-                    frames += 1
-                pool.submit(w.state(), noise_seed=int(w.noise_rng.integers(2**31)))
-        else:
-
-            def tick(w: World) -> None:
-                nonlocal frames
-                w.render(with_seg=False)
-                frames += 1
-
+        feed = None
+        if camera != "none":
+            feed = stack.enter_context(CameraFeed(camera, config, settings.seed, settings.render_workers))
         sim_start = world.time_s
-        wall_s, cpu_s = _fly(world, every, tick)
-        if camera == "workers":
+        wall_s, cpu_s = _fly(world, every, feed.tick if feed is not None else lambda w: None)
+        if feed is not None:
             t0 = time.perf_counter()
-            while pool.outstanding:
-                pool.collect()
-                frames += 1
+            feed.drain()
             wall_s += time.perf_counter() - t0
         sim_s = world.time_s - sim_start
     return {
@@ -130,7 +126,9 @@ def measure_flight_rtf(settings: SimBenchSettings, camera: str) -> dict[str, flo
         "real_time_factor": sim_s / wall_s,
         "cpu_s_main_process": cpu_s,
         "cpu_real_time_factor": sim_s / cpu_s,
-        "frames": frames,
+        "frames": feed.frames if feed is not None else 0,
+        "load_avg_1min_before": load_before,
+        "load_avg_1min_after": os.getloadavg()[0],
     }
 
 
@@ -198,8 +196,15 @@ def measure_collection(settings: SimBenchSettings) -> dict[str, float]:
 def run_sim_bench(settings: SimBenchSettings) -> dict[str, Any]:
     """All measurements as a JSON-able dict."""
     load_before = os.getloadavg()[0]
+    config = WorldConfig(camera=CameraConfig(width=settings.camera_size_px, height=settings.camera_size_px))
+    choice = choose_render_mode(
+        settings.render_mode,
+        lambda: calibrate(
+            config, settings.seed, camera_hz=settings.camera_hz, workers=settings.render_workers
+        ),
+    )
     physics = measure_flight_rtf(settings, camera="none")
-    camera = measure_flight_rtf(settings, camera="inline")
+    camera = measure_flight_rtf(settings, camera="single")
     parallel = measure_flight_rtf(settings, camera="workers")
     render = measure_render_ms(settings)
     collection = measure_collection(settings)
@@ -212,7 +217,23 @@ def run_sim_bench(settings: SimBenchSettings) -> dict[str, Any]:
         "physics_no_camera": physics,
         "physics_camera": {**camera, "camera_hz": settings.camera_hz, "camera_px": settings.camera_size_px},
         "physics_camera_render_workers": {**parallel, "workers": settings.render_workers},
+        "render_mode": choice.as_dict(),
         "render_ms": render,
         "collection_224": collection,
         "targets": TARGETS,
     }
+
+
+@contextlib.contextmanager
+def cpu_hogs(count: int) -> Iterator[list[int]]:
+    """`count` processes busy-looping on the CPU while the block runs (their pids); killed after."""
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(count)]
+    if procs:
+        logger.info("started %d CPU hog(s): %s", count, [p.pid for p in procs])
+    try:
+        yield [p.pid for p in procs]
+    finally:
+        for proc in procs:
+            proc.kill()
+        for proc in procs:
+            proc.wait(timeout=10.0)

@@ -10,7 +10,12 @@ from pathlib import Path
 from typing import Any
 
 import sim_world.bench as bench
-from sim_world.bench import TARGETS, SimBenchSettings, run_sim_bench
+from sim_world.bench import TARGETS, SimBenchSettings, cpu_hogs, run_sim_bench
+from sim_world.rendering.render_mode import RENDER_MODES
+
+
+def _loads(figures: dict[str, Any]) -> str:
+    return f"{figures['load_avg_1min_before']:.2f} before, {figures['load_avg_1min_after']:.2f} after"
 
 
 def format_report(result: dict[str, Any]) -> str:
@@ -19,7 +24,7 @@ def format_report(result: dict[str, Any]) -> str:
     def verdict(value: float, key: str) -> str:
         return f"target >= {TARGETS[key]:g}: " + ("meets" if value >= TARGETS[key] else "BELOW")
 
-    m, cam = result["machine"], result["physics_camera"]
+    m, cam, mode = result["machine"], result["physics_camera"], result["render_mode"]
     phys = result["physics_no_camera"]["real_time_factor"]
     inline = cam["real_time_factor"]
     parallel = result["physics_camera_render_workers"]
@@ -31,10 +36,13 @@ def format_report(result: dict[str, Any]) -> str:
         f"{m['load_avg_1min_after']:.2f} after (other work on the machine slows every number)",
         f"physics, no camera:                 {phys:6.1f}x real time ({verdict(phys, 'physics_rtf')}); "
         f"by CPU time {result['physics_no_camera']['cpu_real_time_factor']:.1f}x",
-        f"physics + {camera}, inline: {inline:6.2f}x real time ({verdict(inline, 'camera_rtf')}); "
-        f"by CPU time {cam['cpu_real_time_factor']:.2f}x",
-        f"physics + {camera}, {parallel['workers']} render workers: {rtf_workers:.2f}x real time "
-        f"({verdict(rtf_workers, 'camera_rtf')})",
+        f"physics + {camera}, single (inline): {inline:6.2f}x real time ({verdict(inline, 'camera_rtf')}); "
+        f"by CPU time {cam['cpu_real_time_factor']:.2f}x; load {_loads(cam)}",
+        f"physics + {camera}, {parallel['workers']} render workers: {rtf_workers:6.2f}x real time "
+        f"({verdict(rtf_workers, 'camera_rtf')}); load {_loads(parallel)}",
+        f"render mode: {mode['mode']} ({mode['reason']}"
+        + (f"; {m['cpu_hogs']} CPU hog(s) running" if m.get("cpu_hogs") else "")
+        + f"); faster in the full flight: {'workers' if rtf_workers > inline else 'single'}",
         "render per frame (ms)   p50 no-seg  p99 no-seg   p50 seg   p99 seg   CPU p50 no-seg",
     ]
     for size, row in result["render_ms"].items():
@@ -61,11 +69,29 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
     parser.add_argument("--collect-images", type=int, default=400, help="images for the throughput run")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="collection workers")
+    parser.add_argument(
+        "--render-mode",
+        choices=RENDER_MODES,
+        default="auto",
+        help="render mode to choose: auto calibrates both here (the bench measures both anyway)",
+    )
+    parser.add_argument(
+        "--cpu-hogs",
+        type=int,
+        default=0,
+        help="busy-looping processes to run meanwhile (a measurement under load)",
+    )
     args = parser.parse_args(argv)
     settings = replace(
-        SimBenchSettings(), seed=args.seed, collect_images=args.collect_images, collect_workers=args.workers
+        SimBenchSettings(),
+        seed=args.seed,
+        collect_images=args.collect_images,
+        collect_workers=args.workers,
+        render_mode=args.render_mode,
     )
-    result = run_sim_bench(settings)
+    with cpu_hogs(args.cpu_hogs):
+        result = run_sim_bench(settings)
+    result["machine"]["cpu_hogs"] = args.cpu_hogs
     print(format_report(result))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

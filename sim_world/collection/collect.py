@@ -38,6 +38,7 @@ from sim_world.collection.plan import (
     View,
     drone_pose_for_view,
     plan_collection,
+    plan_held_out,
     sample_empty_view,
     sample_view,
     sector_of_offset,
@@ -46,7 +47,7 @@ from sim_world.rendering.camera import ForwardCamera
 from sim_world.scene.target_truth import TargetTruth
 from sim_world.world import World, WorldConfig
 
-__all__ = ["CollectConfig", "CollectResult", "collect", "load_manifest", "render_scenes"]
+__all__ = ["CollectConfig", "CollectResult", "collect", "load_manifest", "plan_held_out", "render_scenes"]
 
 logger = logging.getLogger(__name__)
 
@@ -245,8 +246,13 @@ class CollectionTaskError(RuntimeError):
     """Some chunks of the collection failed on their workers; the others were written."""
 
 
-def collect(cfg: CollectConfig, progress: bool = True, ray: str | None = None) -> CollectResult:
+def collect(
+    cfg: CollectConfig, progress: bool = True, ray: str | None = None, plan: CollectionPlan | None = None
+) -> CollectResult:
     """Run the collection into `cfg.out_dir` (which must not hold a dataset yet).
+
+    `plan`: the images to render (default `plan_collection(cfg)`; `plan_held_out` for a sample
+    of test and empty images on chosen scene seeds).
 
     `ray` (`core.parallel`): render the chunks of scenes on Ray ("local" or a cluster's address)
     instead of local processes. A chunk that fails (a crashed worker) is named by its scene seeds
@@ -254,7 +260,7 @@ def collect(cfg: CollectConfig, progress: bool = True, ray: str | None = None) -
     """
     out_dir = Path(cfg.out_dir)
     prepare_output_dir(out_dir)
-    plan = plan_collection(cfg)
+    plan = plan_collection(cfg) if plan is None else plan
     counts = {"goal": 0, "train": 0, "test": 0, "empty": 0}
     write_json_atomic(out_dir / DATASET_JSON, _metadata(cfg, plan, counts, complete=False))
     chunks = plan.chunks()

@@ -152,21 +152,47 @@ def plan_collection(cfg: CollectConfig) -> CollectionPlan:
     ]
     order = rng.permutation(len(train_kinds))
     train_scene_of = {int(k): train_seeds[pos // cfg.images_per_scene] for pos, k in enumerate(order)}
-    # Test images cycle over the eight sectors and the centre, so every class is represented.
+    held_out, held_scene_of = _held_out_kinds(cfg, test_seeds, rng)
+    images = _specs(((train_kinds, train_scene_of), (held_out, held_scene_of)))
+    return CollectionPlan(images, train_seeds, test_seeds)
+
+
+def plan_held_out(cfg: CollectConfig, first_scene_seed: int) -> CollectionPlan:
+    """Only `cfg.n_test` test and `cfg.n_empty` empty images, on the consecutive scene seeds from
+    `first_scene_seed` (a benchmark's own sample; `cfg`'s goal and sector counts are ignored).
+
+    `plan_collection` draws scene seeds below 2**31 - 1, so a `first_scene_seed` at or above
+    2**31 gives scenes no dataset `dronectl collect` writes can hold.
+    """
+    n_scenes = math.ceil((cfg.n_test + cfg.n_empty) / cfg.images_per_scene)
+    seeds = tuple(range(first_scene_seed, first_scene_seed + n_scenes))
+    rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0x4E1D07]))
+    held_out, scene_of = _held_out_kinds(cfg, seeds, rng)
+    return CollectionPlan(_specs(((held_out, scene_of),)), (), seeds)
+
+
+def _held_out_kinds(
+    cfg: CollectConfig, test_seeds: tuple[int, ...], rng: np.random.Generator
+) -> tuple[list[tuple[str, str]], dict[int, int]]:
+    """Test images cycling over the eight sectors and the centre (every class represented), then
+    the empty ones; each image's scene seed, the images shuffled over the scenes."""
     test_classes = ("centre", *SECTORS)
     held_out = [("test", test_classes[i % len(test_classes)]) for i in range(cfg.n_test)]
     held_out += [("empty", "none")] * cfg.n_empty
     held_order = rng.permutation(len(held_out))
-    held_scene_of = {int(k): test_seeds[pos // cfg.images_per_scene] for pos, k in enumerate(held_order)}
+    return held_out, {int(k): test_seeds[pos // cfg.images_per_scene] for pos, k in enumerate(held_order)}
 
+
+def _specs(groups: tuple[tuple[list[tuple[str, str]], dict[int, int]], ...]) -> tuple[ImageSpec, ...]:
+    """Number the images of each (split, sector) list in order, with their scene seeds."""
     images: list[ImageSpec] = []
     counters = {"goal": 0, "train": 0, "test": 0, "empty": 0}
-    for kinds, scene_of in ((train_kinds, train_scene_of), (held_out, held_scene_of)):
+    for kinds, scene_of in groups:
         for k, (split, sector) in enumerate(kinds):
             image_id = f"{split}_{counters[split]:06d}"
             counters[split] += 1
             images.append(ImageSpec(len(images), image_id, split, sector, scene_of[k]))
-    return CollectionPlan(tuple(images), train_seeds, test_seeds)
+    return tuple(images)
 
 
 @dataclass(frozen=True)
