@@ -77,7 +77,7 @@ def test_grounded_training_plans_toward_the_target_the_words_name(tmp_path: Path
     data = write_synthetic_dataset(tmp_path / "two", n_goal=40, n_train=400, n_test=120, size=64, targets=2)
     preset = PRESETS["grounded"]
     model_cfg = replace(preset.model, image_size=64, base_width=8)
-    cfg = replace(preset.train, epochs=30, learning_rate=2e-3, threads=2)
+    cfg = replace(preset.train, epochs=30, learning_rate=2e-3, threads=1)
     # Single-target images teach where a target is; two-target images, which one the words mean.
     train([one, data], tmp_path / "run", model_cfg, cfg, progress=False)
     ckpt = load_checkpoint(tmp_path / "run")
