@@ -95,6 +95,8 @@ def _merged_index(data_dirs: Sequence[Path]) -> DatasetIndex:
     if len(indices) == 1:
         return first
     meta = {**first.meta, "merged": [{"path": str(i.root), "meta": i.meta} for i in indices]}
+    for key in ("train_scene_seeds", "test_scene_seeds"):  # every folder's, so "unseen" checks see them all
+        meta[key] = sorted({s for i in indices for s in i.meta.get(key, [])})
     rows = tuple(r for i in indices for r in i.rows)
     return DatasetIndex(first.root, meta, rows, first.width_px, first.height_px)
 
