@@ -16,6 +16,7 @@ from __future__ import annotations
 import importlib.util
 import io
 import logging
+import time
 import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -131,3 +132,31 @@ class OnnxModule:
                 raise OnnxBackendError(f"{what}: ONNX output {name!r} differs from torch by {error:.3g}")
         log.debug("%s: exported to ONNX (%d bytes)", what, len(buffer.getvalue()))
         return session
+
+
+def time_side_by_side(
+    calls: dict[str, Callable[[int], object]], repeats: int, rounds: int = 4, warmup: int = 20
+) -> dict[str, dict[str, float]]:
+    """p50 / p99 / mean / max milliseconds of each backend's `call(i)` (i = 0, 1, ... picks the input).
+
+    Each backend runs `repeats` calls in all, in `rounds` alternating blocks, so that the drift of a
+    shared machine's speed falls on every backend alike.
+    """
+    times: dict[str, list[float]] = {name: [] for name in calls}
+    for call in calls.values():
+        for i in range(warmup):
+            call(i)
+    per_round = max(1, repeats // rounds)
+    for r in range(rounds):
+        for name, call in calls.items():
+            for i in range(r * per_round, (r + 1) * per_round):
+                start = time.perf_counter()
+                call(i)
+                times[name].append(time.perf_counter() - start)
+    stats = {}
+    for name, values in times.items():
+        ms = np.asarray(values) * 1e3
+        stats[name] = {"calls": int(ms.size), "p50_ms": float(np.percentile(ms, 50)),
+                       "p99_ms": float(np.percentile(ms, 99)), "mean_ms": float(ms.mean()),
+                       "max_ms": float(ms.max())}  # fmt: skip
+    return stats

@@ -137,9 +137,13 @@ class ImageDetector:
 
     @classmethod
     def load(
-        cls, run_dir: str | Path, score_threshold: float | None = None, backend: str = "auto"
+        cls,
+        run_dir: str | Path,
+        score_threshold: float | None = None,
+        backend: str = "auto",
+        threads: int | None = 1,
     ) -> ImageDetector:
-        return cls(load_model(run_dir), score_threshold, backend)
+        return cls(load_model(run_dir), score_threshold, backend, threads)
 
     @classmethod
     def shipped(cls, score_threshold: float | None = None, backend: str = "auto") -> ImageDetector:
