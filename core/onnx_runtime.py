@@ -137,12 +137,14 @@ class OnnxModule:
 def time_side_by_side(
     calls: dict[str, Callable[[int], object]], repeats: int, rounds: int = 4, warmup: int = 20
 ) -> dict[str, dict[str, float]]:
-    """p50 / p99 / mean / max milliseconds of each backend's `call(i)` (i = 0, 1, ... picks the input).
+    """p50 / p99 / mean / max wall milliseconds of each backend's `call(i)` (i = 0, 1, ... picks the input).
 
     Each backend runs `repeats` calls in all, in `rounds` alternating blocks, so that the drift of a
-    shared machine's speed falls on every backend alike.
+    shared machine's speed falls on every backend alike. `cpu_p50_ms` / `cpu_p99_ms` are the calling
+    thread's CPU time per call: the wall time less the time other processes held the core.
     """
     times: dict[str, list[float]] = {name: [] for name in calls}
+    cpu: dict[str, list[float]] = {name: [] for name in calls}
     for call in calls.values():
         for i in range(warmup):
             call(i)
@@ -150,13 +152,15 @@ def time_side_by_side(
     for r in range(rounds):
         for name, call in calls.items():
             for i in range(r * per_round, (r + 1) * per_round):
-                start = time.perf_counter()
+                start, start_cpu = time.perf_counter(), time.thread_time()
                 call(i)
                 times[name].append(time.perf_counter() - start)
+                cpu[name].append(time.thread_time() - start_cpu)
     stats = {}
     for name, values in times.items():
-        ms = np.asarray(values) * 1e3
+        ms, cpu_ms = np.asarray(values) * 1e3, np.asarray(cpu[name]) * 1e3
         stats[name] = {"calls": int(ms.size), "p50_ms": float(np.percentile(ms, 50)),
                        "p99_ms": float(np.percentile(ms, 99)), "mean_ms": float(ms.mean()),
-                       "max_ms": float(ms.max())}  # fmt: skip
+                       "max_ms": float(ms.max()), "cpu_p50_ms": float(np.percentile(cpu_ms, 50)),
+                       "cpu_p99_ms": float(np.percentile(cpu_ms, 99))}  # fmt: skip
     return stats

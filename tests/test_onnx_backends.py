@@ -9,14 +9,17 @@ the same detections. Also the backend choice: "auto" takes ONNX when onnxruntime
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from latent_synthetic import write_synthetic_dataset
 
 import core.onnx_runtime as onnx_runtime
+import tools.bench_inference as bench_inference
 from controller.planning.latent.checkpoint import save_checkpoint
 from controller.planning.latent.config import PRESETS
 from controller.planning.latent.instructions import tokenizer_corpus
@@ -126,3 +129,24 @@ def test_a_graph_that_disagrees_is_refused_and_auto_falls_back(monkeypatch: pyte
     with pytest.raises(OnnxBackendError, match="differs from torch"):
         ImageDetector.shipped(backend="onnx")
     assert ImageDetector.shipped(backend="auto").backend == "torch"
+
+
+def test_time_side_by_side_times_every_backend_in_alternating_rounds() -> None:
+    order: list[str] = []
+    calls = {name: (lambda i, name=name: order.append(name)) for name in ("torch", "onnx")}
+    stats = onnx_runtime.time_side_by_side(calls, repeats=8, rounds=4, warmup=1)
+    assert {name: s["calls"] for name, s in stats.items()} == {"torch": 8, "onnx": 8}
+    assert order[2:] == (["torch"] * 2 + ["onnx"] * 2) * 4  # after one warm-up call each
+    assert all(0.0 <= s["p50_ms"] <= s["p99_ms"] <= s["max_ms"] for s in stats.values())
+
+
+def test_bench_inference_reports_both_backends(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    data = write_synthetic_dataset(tmp_path / "data", n_goal=2, n_train=2, n_test=6, size=96)
+    argv = ["--data", str(data), "--decisions", "8", "--frames", "8", "--json", str(tmp_path / "b.json")]
+    assert bench_inference.main(argv) == 0
+    result = json.loads((tmp_path / "b.json").read_text())
+    assert result["planner"]["max_abs_distance_difference"] <= 1e-4 and result["planner"]["same_actions"]
+    assert result["detector"]["max_abs_head_difference"] <= 1e-4 and result["detector"]["same_kinds"]
+    for model in ("planner", "detector"):
+        assert {b: t["calls"] for b, t in result[model]["latency"].items()} == {"torch": 8, "onnx": 8}
+    assert "planner: 6 frames" in capsys.readouterr().out

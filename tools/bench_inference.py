@@ -3,7 +3,8 @@
 On the same frames of a dataset folder (`dronectl collect`): each model's largest output difference
 between the backends and whether their decisions agree, then latency per decision (planner: resize,
 image encoding, 9 candidates) and per frame (detector: network and decoding), p50 / p99, the backends
-timed in alternating rounds. Needs onnxruntime (`pip install -e '.[onnx]'`). The load average is
+timed in alternating rounds, wall time and the thread's CPU time (the wall time less what other
+processes took of the core). Needs onnxruntime (`pip install -e '.[onnx]'`). The load average is
 printed beside the figures: other work on the machine slows them.
 """
 
@@ -41,7 +42,8 @@ def _lines(name: str, unit: str, result: dict[str, Any], difference: str, agree:
     for backend, t in result["latency"].items():
         lines.append(
             f"  {backend:>5}: p50 {t['p50_ms']:.2f} ms, p99 {t['p99_ms']:.2f} ms, "
-            f"mean {t['mean_ms']:.2f} ms, max {t['max_ms']:.2f} ms over {t['calls']} {unit}"
+            f"mean {t['mean_ms']:.2f} ms, max {t['max_ms']:.2f} ms over {t['calls']} {unit}; "
+            f"CPU time p50 {t['cpu_p50_ms']:.2f} ms, p99 {t['cpu_p99_ms']:.2f} ms"
         )
     return lines
 
