@@ -13,7 +13,6 @@ the example inputs before it is used; a graph that disagrees raises `OnnxBackend
 
 from __future__ import annotations
 
-import importlib.util
 import io
 import logging
 import time
@@ -35,7 +34,12 @@ class OnnxBackendError(RuntimeError):
 
 
 def onnxruntime_available() -> bool:
-    return importlib.util.find_spec("onnxruntime") is not None
+    """Whether onnxruntime imports (installed, and its shared libraries load)."""
+    try:
+        import onnxruntime  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 def resolve_backend(requested: str, what: str) -> str:
