@@ -21,11 +21,13 @@ import logging
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from core.onnx_runtime import time_side_by_side
 from perception.detector_eval import latency_ms, read_image_rgb
 from perception.errors import CameraTimeoutError
 from perception.image_detector import ImageDetector
@@ -115,3 +117,30 @@ def sample_images(data_dir: Path, count: int) -> list[np.ndarray]:
     rows, _ = load_manifest(data_dir)
     picked = [r for r in rows if r["split"] in ("test", "empty")][:count]
     return [read_image_rgb(data_dir / r["image"]) for r in picked]
+
+
+def compare_detector_backends(
+    weights: Path, images: list[np.ndarray], frames: int, threads: int = 1
+) -> dict[str, Any]:
+    """`detect` on torch and on ONNX Runtime, side by side on the same frames (needs onnxruntime).
+
+    The largest |head output difference| (heatmap logits, offsets, log edges), whether every
+    detection's kind agrees, then each backend's latency per frame.
+    """
+    import torch
+
+    detectors = {b: ImageDetector.load(weights, backend=b, threads=threads) for b in ("torch", "onnx")}
+    with torch.inference_mode():
+        want, got = (detectors[b]._forward(images).numpy() for b in ("torch", "onnx"))
+    kinds = [[None if d is None else d.kind for d in detectors[b].detect_batch(images)] for b in detectors]
+
+    def call(detector: ImageDetector, i: int) -> None:
+        detector.detect(images[i % len(images)])
+
+    calls = {b: partial(call, d) for b, d in detectors.items()}
+    return {
+        "images": len(images),
+        "max_abs_head_difference": float(np.abs(got - want).max()),
+        "same_kinds": kinds[0] == kinds[1],
+        "latency": time_side_by_side(calls, frames),
+    }

@@ -18,6 +18,10 @@ first; a weaker peak whose centre lies inside a stronger detection's box is the
 same object seen as another kind (or a second peak of it) and is dropped. Each
 detection also carries its attribute, the trim colour read from the pixels
 (`perception.attributes.read_attribute`).
+
+The network runs on torch or, exported from the loaded weights when the detector is made, on
+ONNX Runtime (`backend`, default "auto": ONNX when onnxruntime is installed); the decoding is the
+same for both, and their head outputs agree within 1e-4 (tests/test_perception_onnx.py).
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ import torch
 import torch.nn.functional as F
 from safetensors.torch import load_file, save_file
 
+from core.onnx_runtime import OnnxModule, onnx_for
 from perception.attributes import read_attribute
 from perception.detector_model import EDGE_SCALE_PX, STRIDE, CentreNet, DetectorConfig, fuse_for_inference
 from perception.errors import DetectorCheckpointError
@@ -109,25 +114,47 @@ class ImageDetector:
     """Detect the inspection target in RGB images with a trained `CentreNet`.
 
     `score_threshold` overrides the checkpoint's. The detector takes the model over
-    (its batch norms are folded in place). Run single frames on one torch thread
+    (its batch norms are folded in place). `backend`: "torch", "onnx" (OnnxBackendError without
+    onnxruntime) or "auto" (ONNX when onnxruntime is installed and the export checks out; logged).
+    `threads` is the ONNX Runtime thread count; on torch, run single frames on one thread
     (`torch.set_num_threads(1)`) for the steadiest latency on a small CPU.
     """
 
-    def __init__(self, model: CentreNet, score_threshold: float | None = None) -> None:
+    def __init__(
+        self,
+        model: CentreNet,
+        score_threshold: float | None = None,
+        backend: str = "auto",
+        threads: int | None = 1,
+    ) -> None:
         self.config = model.config
         self.score_threshold = self.config.score_threshold if score_threshold is None else score_threshold
         if not 0.0 < self.score_threshold < 1.0:
             raise ValueError(f"score_threshold must be in (0, 1), got {self.score_threshold}")
         self._model = fuse_for_inference(model).to(memory_format=torch.channels_last)
+        self._onnx = onnx_for(backend, "image detector", lambda: self._export(threads))
+        self.backend = "torch" if self._onnx is None else "onnx"
 
     @classmethod
-    def load(cls, run_dir: str | Path, score_threshold: float | None = None) -> ImageDetector:
-        return cls(load_model(run_dir), score_threshold)
+    def load(
+        cls,
+        run_dir: str | Path,
+        score_threshold: float | None = None,
+        backend: str = "auto",
+        threads: int | None = 1,
+    ) -> ImageDetector:
+        return cls(load_model(run_dir), score_threshold, backend, threads)
 
     @classmethod
-    def shipped(cls, score_threshold: float | None = None) -> ImageDetector:
+    def shipped(cls, score_threshold: float | None = None, backend: str = "auto") -> ImageDetector:
         """The weights shipped with the package (see perception/assets/README.md)."""
-        return cls.load(SHIPPED_DIR, score_threshold)
+        return cls.load(SHIPPED_DIR, score_threshold, backend)
+
+    def _export(self, threads: int | None) -> OnnxModule:
+        """The network as an ONNX Runtime session, checked against torch on random inputs."""
+        size = self.config.input_size
+        example = torch.randn(2, 3, size, size, generator=torch.Generator().manual_seed(0))
+        return OnnxModule.export(self._model, (example,), ("image",), ("heads",), "image detector", threads)
 
     def _prepare(self, image: np.ndarray) -> np.ndarray:
         if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
@@ -166,7 +193,9 @@ class ImageDetector:
         x = normalise(torch.from_numpy(batch).permute(0, 3, 1, 2)).contiguous(
             memory_format=torch.channels_last
         )
-        return self._model(x)  # (B, K + 6, G, G)
+        if self._onnx is None:
+            return self._model(x)  # (B, K + 6, G, G)
+        return torch.from_numpy(self._onnx.run(x.numpy())[0])
 
     def _decode(self, out: torch.Tensor, width: int, height: int) -> Detection | None:
         k = len(self.config.kinds)

@@ -98,7 +98,7 @@ def test_read_attribute_on_synthetic_trim() -> None:
 
 def test_decoding_keeps_each_local_peak_once_and_drops_another_kind_on_the_same_object() -> None:
     """A hand-made head output: a gauge peak with a weaker valve peak 1 cell away, a switch box elsewhere."""
-    detector = ImageDetector(CentreNet(DetectorConfig()))
+    detector = ImageDetector(CentreNet(DetectorConfig()), backend="torch")  # the torch network is stubbed
     grid, k = detector.config.grid_size, len(detector.config.kinds)
     out = torch.zeros(1, k + 6, grid, grid)
     out[:, :k] = -8.0  # sigmoid ≈ 0 everywhere

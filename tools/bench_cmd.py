@@ -1,4 +1,4 @@
-"""`dronectl bench sim|perception|flight|px4 [options]`: the speed benchmarks.
+"""`dronectl bench sim|perception|inference|flight|px4 [options]`: the speed benchmarks.
 
 Each benchmark's measuring code lives with the code it measures (`sim_world.bench`,
 `flight.bench`, `flight.bench_px4`, `perception.bench`); its command line is a
@@ -15,6 +15,7 @@ import sys
 BENCHMARKS: dict[str, tuple[str, str]] = {
     "sim": ("tools.bench_sim", "physics and camera real-time factors, render times, collection throughput"),
     "perception": ("tools.bench_perception", "detector latency, stream-camera latency, detector accuracy"),
+    "inference": ("tools.bench_inference", "planner and detector on torch and on ONNX Runtime, side by side"),
     "flight": ("tools.bench_flight", "vehicle command and telemetry latency"),
     "px4": ("tools.bench_px4", "real PX4 SITL in lockstep: readiness, hover drift, lockstep speed"),
 }

@@ -37,7 +37,11 @@ def build_parser() -> argparse.ArgumentParser:
     d = AccuracySampleSizes()
     p.add_argument("--json", type=Path, default=None, help="write the figures to this JSON file")
     p.add_argument("--weights", type=Path, default=SHIPPED_DIR, help="detector run folder (default: shipped)")
-    p.add_argument("--threads", type=int, default=1, help="torch threads for the detector")
+    p.add_argument("--threads", type=int, default=1, help="threads for the detector")
+    p.add_argument(
+        "--backend", default="auto", choices=("torch", "onnx", "auto"),
+        help="detector backend for the latency (auto: onnx when onnxruntime is installed)",
+    )
     p.add_argument("--frames", type=int, default=300, help="frames timed for the detector latency")
     p.add_argument("--stream-frames", type=int, default=100, help="frames timed through the stream (0: skip)")
     p.add_argument("--seed", type=int, default=1234, help="seed of the sim scene of the stream benchmark")
@@ -172,16 +176,17 @@ def main(argv: list[str]) -> int:
             args.weights, work_dir, sizes, args.workers, args.max_fp_rate, args.targets, args.data
         )
         images = sample_images(args.data or work_dir / "test", 64)
-    detector = ImageDetector.load(args.weights)
+    detector = ImageDetector.load(args.weights, backend=args.backend, threads=args.threads)
     load_before = os.getloadavg()
     lat = bench_detector_latency(detector, images, args.frames)
-    results["detector_latency_224"] = {**lat, "load_avg_before": list(load_before),
+    results["detector_latency_224"] = {**lat, "backend": detector.backend,
+                                       "load_avg_before": list(load_before),
                                        "load_avg_after": list(os.getloadavg())}  # fmt: skip
     if args.stream_frames > 0:
         results["stream"] = bench_stream(args.seed, args.stream_frames)
     results["targets_met"] = targets_met(results)
     print(
-        f"detector latency (224 px, {args.threads} thread(s), {args.frames} frames): "
+        f"detector latency (224 px, {detector.backend}, {args.threads} thread(s), {args.frames} frames): "
         f"mean {lat['mean_ms']:.2f} ms, p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms "
         f"(target p99 <= {DETECTOR_P99_TARGET_MS:g} ms); "
         f"load average {load_before[0]:.2f} before, {os.getloadavg()[0]:.2f} after on {os.cpu_count()} CPUs"

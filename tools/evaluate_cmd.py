@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 
 from controller.planning.actions import ALL_ACTIONS
@@ -28,7 +29,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--latency", type=int, default=0, metavar="N", help="also time N planner decisions on the test images"
     )
-    p.add_argument("--threads", type=int, default=1, help="torch threads for the latency measurement")
+    p.add_argument("--threads", type=int, default=1, help="threads for the latency measurement")
+    p.add_argument(
+        "--backend",
+        default="auto",
+        choices=("torch", "onnx", "auto"),
+        help="planner backend for the latency measurement (auto: onnx when onnxruntime is installed)",
+    )
     p.add_argument("--json", type=Path, default=None, help="also write the full result as JSON here")
     return p
 
@@ -65,11 +72,13 @@ def main(argv: list[str]) -> int:
     if args.latency > 0:
         from controller.planning.latent.bench import latency_on_dataset
 
-        lat = latency_on_dataset(args.model, args.data, args.split, args.latency, args.threads)
+        load_before = os.getloadavg()[0]
+        lat = latency_on_dataset(args.model, args.data, args.split, args.latency, args.threads, args.backend)
         print(
-            f"planner latency over {lat.decisions} decisions ({args.threads} threads): "
+            f"planner latency over {lat.decisions} decisions ({lat.backend}, {args.threads} threads): "
             f"mean {lat.mean_ms:.2f} ms, p50 {lat.p50_ms:.2f} ms, p99 {lat.p99_ms:.2f} ms, "
-            f"max {lat.max_ms:.2f} ms"
+            f"max {lat.max_ms:.2f} ms; load average {load_before:.2f} before, "
+            f"{os.getloadavg()[0]:.2f} after on {os.cpu_count()} CPUs"
         )
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
