@@ -53,13 +53,11 @@ def faults_from_args(args: argparse.Namespace) -> dict[str, Any] | None:
     return faults or None
 
 
-def _speed(text: str) -> float | str:
-    if text.strip().lower() == "max":
-        return "max"
+def _speed(option: str, text: str) -> float | str:
     try:
-        return float(text)
-    except ValueError:
-        raise ValueError(f"--px4-speed must be a number or 'max', got {text!r}") from None
+        return parse_sim_speed(text)
+    except ValueError as exc:
+        raise ValueError(f"{option}: {exc}") from None
 
 
 def main(argv: list[str]) -> int:
@@ -170,8 +168,8 @@ def main(argv: list[str]) -> int:
             vehicle=args.vehicle, max_steps=args.max_steps, epsilon_px=args.epsilon_px,
             checkpoint=args.checkpoint, detector=args.detector, parallel=args.parallel,
             detector_checkpoint=args.detector_checkpoint, scale_moves=not args.fixed_moves,
-            px4_dir=args.px4, px4_speed=_speed(args.px4_speed), faults=faults_from_args(args),
-            sim_speed=parse_sim_speed(args.sim_speed),
+            px4_dir=args.px4, px4_speed=_speed("--px4-speed", args.px4_speed), faults=faults_from_args(args),
+            sim_speed=_speed("--sim-speed", args.sim_speed),
             rerun=args.rerun, ray=args.ray, targets=args.targets, twins=args.twins,
             instructions=args.instructions, absent=args.absent,
         )  # fmt: skip

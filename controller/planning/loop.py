@@ -90,7 +90,7 @@ from controller.planning.loop_records import (
 from controller.planning.planners import Observation, Planner
 from core.centring import default_stop_margin_px, is_centred, offset_px
 from flight.moves import MoveResult, fly_offset
-from flight.vehicle import Vehicle
+from flight.vehicle import Deadline, Vehicle
 from perception.camera import Camera
 from perception.detector import Detector
 from perception.errors import CameraFrozenError
@@ -285,9 +285,9 @@ class CentringLoop:
         if before is None or not np.array_equal(record.frame.image, before):
             return record
         cfg = self.config
-        deadline = self.vehicle.time_s() + cfg.frame_timeout_s
+        deadline = Deadline(self.vehicle, cfg.frame_timeout_s)  # frames come at wall-clock rates
         log.warning("camera picture unchanged after a move: waiting for a fresh one")
-        while self.vehicle.time_s() < deadline:
+        while not deadline.expired():
             self.vehicle.sleep(cfg.settle_s)
             record = self._observe(index)
             if not np.array_equal(record.frame.image, before):

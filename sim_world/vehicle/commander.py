@@ -147,6 +147,12 @@ class Commander:
             return math.inf
         return self._client_age(self._model.time_s - sp.received_s, self._setpoint_client_s)
 
+    def last_setpoint_at(self) -> tuple[float, float] | None:
+        """(simulated, client clock) time of the latest setpoint; None without one or a client clock."""
+        if self._setpoint is None or self._client_clock is None:
+            return None
+        return self._setpoint.received_s, self._setpoint_client_s
+
     def _client_age(self, sim_age_s: float, client_since_s: float) -> float:
         if self._client_clock is None:
             return sim_age_s

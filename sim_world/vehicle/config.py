@@ -42,6 +42,9 @@ class SimVehicleConfig:
     video_fps: float = 15.0
     max_catch_up_s: float = 0.25  # more lag than this and the loop drops time instead of racing
     max_batch_sim_s: float = 1.0 / 60.0  # speed "max": physics per loop turn between link services
+    lockstep_lead_s: float = 0.1  # speed "max" in OFFBOARD: simulated lead over the last setpoint
+    lockstep_silence_s: float = 0.25  # ... until the setpoint stream is this silent (wall)
+    max_telemetry_hz: float = 250.0  # faster than real time: the cap on the sped-up clock streams
 
     def __post_init__(self) -> None:
         if not 0 <= self.instance <= 99:

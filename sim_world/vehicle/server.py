@@ -15,6 +15,7 @@ Use in-process (tests) as `with SimVehicle(model, config) as v: ...`, or through
 from __future__ import annotations
 
 import logging
+import math
 import select
 import threading
 import time
@@ -24,6 +25,7 @@ from typing import Protocol
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sim_world.vehicle import px4_modes as modes
 from sim_world.vehicle.battery import BatteryModel
 from sim_world.vehicle.commander import Commander
 from sim_world.vehicle.commands import MessageHandler
@@ -226,7 +228,7 @@ class SimVehicle:
         cfg, model, link = self.config, self._model, self._link
         assert link is not None
         dt = 1.0 / model.physics_hz
-        scheduler = MessageScheduler(DEFAULT_RATES_HZ, time.monotonic())
+        scheduler = MessageScheduler(telemetry_rates_hz(cfg), time.monotonic())
         handler = MessageHandler(
             self.commander, self.params, scheduler, self._builder, self._take_snapshot,
             cfg.system_id, cfg.home.altitude_amsl_m,
@@ -241,8 +243,11 @@ class SimVehicle:
         last_state = _state_key(self._snapshot)
         while not self._stop.is_set():
             now = time.monotonic()
-            if flat_out:  # 1. physics: one batch, then serve the link
+            if flat_out:  # 1. physics: one batch, or what the lockstep bound leaves, then serve the link
+                limit_s = self._lockstep_limit_s(now)
                 steps, dropped = max_batch, 0.0
+                if limit_s is not None:
+                    steps = min(steps, max(0, int((limit_s - model.time_s) / dt + 1e-9)))
             else:  # 1. physics: catch up with the wall clock (× speed), dropping time after a long stall
                 lag_s = sim0 + speed * (now - wall0) - model.time_s
                 dropped = max(0.0, lag_s - cfg.max_catch_up_s * speed)
@@ -279,11 +284,20 @@ class SimVehicle:
                 st.sim_s = model.time_s - sim0
                 st.messages_in, st.messages_out = link.stats.received, link.stats.sent
             # 4. sleep until the next physics step or telemetry is due, or a message arrives
-            if flat_out:
-                select.select([link], [], [], 0.0)
+            if flat_out:  # held by the lockstep bound: wait for the client's next setpoint
+                select.select([link], [], [], 0.0 if steps else _MIN_WAIT_S * 4)
                 continue
             wake = min(wall0 + (model.time_s + dt - sim0) / speed, scheduler.next_due_s())
             select.select([link], [], [], min(max(wake - time.monotonic(), _MIN_WAIT_S), _MAX_WAIT_S))
+
+    def _lockstep_limit_s(self, now_s: float) -> float | None:
+        """Speed "max": in OFFBOARD, the simulated time the vehicle may not pass until the client's next
+        setpoint (the last one's + `lockstep_lead_s`); None (free) elsewhere, and once the stream has
+        been silent `lockstep_silence_s` of wall time (a stopped client must still meet the failsafe)."""
+        last = self.commander.last_setpoint_at() if self.commander.mode == modes.OFFBOARD else None
+        if last is None or now_s - last[1] > self.config.lockstep_silence_s:
+            return None
+        return last[0] + self.config.lockstep_lead_s
 
     def _take_snapshot(self) -> VehicleSnapshot:
         c, b = self.commander, self._battery
@@ -300,6 +314,22 @@ class SimVehicle:
             battery_current_a=b.current_a,
             battery_consumed_mah=b.consumed_mah,
         )
+
+
+_CLOCK_STREAMS = (mavlink.MAVLINK_MSG_ID_ATTITUDE, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
+
+
+def telemetry_rates_hz(config: SimVehicleConfig) -> dict[int, float]:
+    """PX4's stream rates (wall clock); faster than real time, ATTITUDE (whose time_boot_ms is a
+    client's clock of the vehicle) and LOCAL_POSITION_NED go up with the speed, to at most
+    `max_telemetry_hz`, so that a client timing a move on the vehicle's clock stops it within
+    about as many simulated milliseconds as at ×1."""
+    rates = dict(DEFAULT_RATES_HZ)
+    if config.faster_than_real_time:
+        factor = math.inf if config.speed == MAX_SPEED else float(config.speed)
+        for msg_id in _CLOCK_STREAMS:
+            rates[msg_id] = max(rates[msg_id], min(rates[msg_id] * factor, config.max_telemetry_hz))
+    return rates
 
 
 _STATE_MESSAGES = (mavlink.MAVLINK_MSG_ID_HEARTBEAT, mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE)
