@@ -1,6 +1,6 @@
 """The sim-vehicle faster than real time: the speed reaches the vehicle, the timers that wait on a
 wall-clock client do not fire spuriously at speed (and still fire when the client stops), and a
-sim-mavlink mission at speed centres. Ports 15960-15962 / 18960 (this file's).
+sim-mavlink mission at speed centres. Ports 15960-15965 / 18960 (this file's).
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from sim_vehicle_client import MavlinkTestClient
 from sim_vehicle_fakes import FakeVehicleModel
 from sim_vehicle_process import SimVehicleOptions, SimVehicleProcess
+from test_sim_vehicle_udp import sim, take_off, wait_mode
 
 from controller.missions.benchmark_plan import BenchmarkConfig, benchmark_missions
 from controller.missions.schema import MissionFileError, parse_mission
@@ -144,3 +145,27 @@ def test_a_sim_mavlink_mission_at_x8_centres(tmp_path: Path) -> None:
     assert report["outcome"] == "centred", (report["message"], done.stdout[-2000:])
     assert report["setup"]["sim_speed"] == 8.0
     assert report["vehicle_s"] > 0.0 and wall_s < 60.0
+
+
+def test_max_runs_free_outside_offboard_and_in_lockstep_with_the_setpoint_stream_in_it() -> None:
+    with sim(15964, speed="max") as (client, vehicle):
+        wall0, sim0 = time.monotonic(), vehicle.stats().sim_s
+        time.sleep(0.5)
+        assert (vehicle.stats().sim_s - sim0) / (time.monotonic() - wall0) > 5.0  # free: no pacing
+        wait_mode(client, modes.AUTO_LOITER, 8.0, after=take_off(client, 1.5))
+
+        def stream(seconds: float) -> None:  # 20 Hz of wall time, as MAVSDK re-sends
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                client.setpoint(mavlink.MAV_FRAME_BODY_NED, 0.0, 0.0, 0.0)
+                time.sleep(0.05)
+
+        stream(0.2)
+        assert client.command(mavlink.MAV_CMD_DO_SET_MODE, 129, 6, 0) == [ACCEPTED]
+        wall0, sim0 = time.monotonic(), vehicle.stats().sim_s
+        stream(1.0)
+        held = (vehicle.stats().sim_s - sim0) / (time.monotonic() - wall0)
+        assert 0.5 < held <= 20 * 0.1 * 1.3  # at most lockstep_lead_s (0.1 s) per setpoint
+        assert vehicle.mode == modes.OFFBOARD
+        stopped = time.monotonic()  # the stream stops: free again, and the failsafe still comes
+        client.wait_for("STATUSTEXT", 3.0, lambda m: m.text == "Failsafe activated", after=stopped)
