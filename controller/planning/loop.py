@@ -94,7 +94,7 @@ from flight.vehicle import Deadline, Vehicle
 from perception.camera import Camera
 from perception.detector import Detector
 from perception.errors import CameraFrozenError
-from perception.types import Detection
+from perception.types import Detection, Frame
 
 log = logging.getLogger(__name__)
 
@@ -299,7 +299,7 @@ class CentringLoop:
 
     def _observe(self, index: int) -> StepRecord:
         t0 = time.perf_counter()
-        frame = self.camera.read(self.config.frame_timeout_s)
+        frame = self._read_fresh()
         telemetry = self.vehicle.telemetry()
         vehicle_time_s = self.vehicle.time_s()
         truth = self.truth_probe() if self.truth_probe is not None else None
@@ -342,6 +342,16 @@ class CentringLoop:
                 f"(for {width} px wide images): give a larger epsilon_px or a smaller stop_margin_px"
             )
         return cfg.epsilon_px - margin
+
+    def _read_fresh(self) -> Frame:
+        """The camera's next frame, re-read until one arrived `fresh_frame_s` after this call (bounded)."""
+        cfg = self.config
+        wanted_s = time.monotonic() + cfg.fresh_frame_s
+        frame = self.camera.read(cfg.frame_timeout_s)
+        give_up_s = wanted_s + cfg.frame_timeout_s  # a camera whose stamps are not this clock's
+        while cfg.fresh_frame_s > 0 and frame.timestamp_s < wanted_s and time.monotonic() < give_up_s:
+            frame = self.camera.read(cfg.frame_timeout_s)
+        return frame
 
     def _fly(self, right_m: float, up_m: float) -> MoveResult:
         cfg = self.config
