@@ -241,7 +241,7 @@ class Mission(StrictModel):
     px4: Px4Spec = Px4Spec()
     faults: FaultSpec = FaultSpec()
 
-    @field_validator("sim_speed")
+    @field_validator("sim_speed", mode="before")
     @classmethod
     def _sim_speed(cls, value: float | str) -> float | str:
         return parse_sim_speed(value)
