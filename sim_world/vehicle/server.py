@@ -239,7 +239,7 @@ class SimVehicle:
         flat_out = cfg.speed == MAX_SPEED
         speed = 1.0 if flat_out else float(cfg.speed)
         max_batch = max(1, round(cfg.max_batch_sim_s * model.physics_hz))
-        announce = cfg.faster_than_real_time  # state changes go out at once (see `_announce_changes`)
+        announce = cfg.faster_than_real_time  # state changes go out at once (`_STATE_MESSAGES`)
         last_state = _state_key(self._snapshot)
         while not self._stop.is_set():
             now = time.monotonic()
