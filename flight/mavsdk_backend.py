@@ -44,7 +44,7 @@ from flight.errors import (
 )
 from flight.mavsdk_link import MavsdkConfig, TelemetryCache, resend_on_timeout, route_mavsdk_logs
 from flight.types import FlightMode, Telemetry, VelocityBody
-from flight.vehicle import Vehicle, wait_for
+from flight.vehicle import Deadline, Vehicle, wait_for
 
 log = logging.getLogger(__name__)
 
@@ -169,6 +169,11 @@ class MavsdkVehicle(Vehicle):
         shows the mode change."""
         return self._cache.texts_since(self._texts_at_offboard)
 
+    @property
+    def wall_paced_telemetry(self) -> bool:  # type: ignore[override]
+        """On the vehicle's clock, waits also last their timeout in wall time (`flight.vehicle.Deadline`)."""
+        return self.config.clock == "vehicle"
+
     def time_s(self) -> float:
         if self.config.clock == "vehicle":
             return self._cache.vehicle_time_s  # one float, written whole by the MAVSDK thread: no lock needed
@@ -216,7 +221,7 @@ class MavsdkVehicle(Vehicle):
     def arm(self, timeout_s: float | None = None) -> None:
         timeout_s = timeout_s or self.config.timeouts.arm_s
         action = self._require(self._action, "arm()")
-        deadline = self.time_s() + timeout_s
+        deadline = Deadline(self, timeout_s)
         if self.telemetry().flight_mode == FlightMode.OFFBOARD:
             # PX4 reverts to the last requested mode after a disarm and refuses to arm in OFFBOARD.
             log.info("disarmed in OFFBOARD (PX4 reverted to it after the last flight): switching to Hold")
@@ -227,11 +232,11 @@ class MavsdkVehicle(Vehicle):
                 action.arm()
                 break
             except ActionError as exc:
-                if exc.result not in _RETRY_ARM or self.time_s() + self.config.arm_retry_period_s > deadline:
+                if exc.result not in _RETRY_ARM or deadline.remaining_s() < self.config.arm_retry_period_s:
                     raise CommandDeniedError("arm()", exc.result.name, self._last_text()) from None
                 log.info("arming refused (%s; %r): retrying", exc.result.name, self._last_text())
                 self.sleep(self.config.arm_retry_period_s)
-        self._wait(lambda t: t.armed, max(0.5, deadline - self.time_s()), "arm()", "armed state in telemetry")
+        self._wait(lambda t: t.armed, max(0.5, deadline.remaining_s()), "arm()", "armed state in telemetry")
         if not math.isfinite(self._ground_down_m):
             self._ground_down_m = self.telemetry().position_ned.down_m
 
@@ -366,9 +371,9 @@ class MavsdkVehicle(Vehicle):
 
     def _confirm_mode(self, mode: FlightMode, timeout_s: float | None, origin: str) -> None:
         timeout_s = timeout_s or self.config.timeouts.mode_change_s
-        deadline = self.time_s() + timeout_s
+        deadline = Deadline(self, timeout_s)
         while (observed := self.telemetry().flight_mode) != mode:
-            if self.time_s() >= deadline:
+            if deadline.expired():
                 raise ModeChangeError(
                     origin, mode.name, f"{observed.name} ({self._last_text()!r})", timeout_s
                 )

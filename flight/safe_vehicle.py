@@ -31,6 +31,7 @@ class SafeVehicle(Vehicle):
         self.inner = inner
         self.limits = limits or SafetyLimits()
         self.realtime = inner.realtime
+        self.wall_paced_telemetry = inner.wall_paced_telemetry
         self.origin: PositionNed | None = None
         self.last_command: VelocityBody = ZERO_VELOCITY
         self.watchdog_trips = 0

@@ -16,6 +16,8 @@ time in simulation.
 from __future__ import annotations
 
 import abc
+import math
+import time
 from collections.abc import Callable
 from types import TracebackType
 
@@ -28,6 +30,9 @@ class Vehicle(abc.ABC):
 
     #: True when the vehicle's clock is wall time (a real link); False for simulated time.
     realtime: bool = True
+    #: True when telemetry arrives at wall-clock rates whatever the vehicle's clock (a MAVLink link to a
+    #: simulator running faster than real time): then every timeout also waits its length in wall time.
+    wall_paced_telemetry: bool = False
 
     @abc.abstractmethod
     def connect(self, timeout_s: float | None = None) -> None:
@@ -98,6 +103,25 @@ class Vehicle(abc.ABC):
         self.close()
 
 
+class Deadline:
+    """When a wait on `vehicle` gives up: `timeout_s` after now on the vehicle's clock and, for a
+    vehicle with `wall_paced_telemetry`, on the wall clock too. At ×k a mode change shown by PX4's
+    1 Hz heartbeat may take a wall second, k simulated seconds: a timeout guards against a vehicle
+    that does not answer, so it must not expire before the link could have answered."""
+
+    def __init__(self, vehicle: Vehicle, timeout_s: float) -> None:
+        self._vehicle = vehicle
+        self.at_s = vehicle.time_s() + timeout_s
+        self._wall_at_s = time.monotonic() + timeout_s if vehicle.wall_paced_telemetry else -math.inf
+
+    def expired(self) -> bool:
+        return self._vehicle.time_s() >= self.at_s and time.monotonic() >= self._wall_at_s
+
+    def remaining_s(self) -> float:
+        """Time left on the slower of the clocks it waits on (0 once expired)."""
+        return max(0.0, self.at_s - self._vehicle.time_s(), self._wall_at_s - time.monotonic())
+
+
 def wait_for(
     vehicle: Vehicle,
     predicate: Callable[[Telemetry], bool],
@@ -110,11 +134,11 @@ def wait_for(
 
     `vehicle.telemetry()` raises on link loss, so no wait outlives a dead link.
     """
-    deadline = vehicle.time_s() + timeout_s
+    deadline = Deadline(vehicle, timeout_s)
     while True:
         telemetry = vehicle.telemetry()
         if predicate(telemetry):
             return telemetry
-        if vehicle.time_s() >= deadline:
+        if deadline.expired():
             raise FlightTimeoutError(origin, timeout_s, waiting_for)
         vehicle.sleep(poll_s)

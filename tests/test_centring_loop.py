@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import pytest
 from fake_vehicle import FakeVehicle
 from mission_fakes import PX_PER_M, FakeCamera, FakeDetector, FakePlanner
@@ -15,6 +17,7 @@ from controller.planning.loop import (
 from controller.planning.planners import ClassicPlanner
 from core.centring import default_stop_margin_px
 from flight.types import VelocityBody
+from perception.types import Frame
 
 RIGHT, LEFT, UP, DOWN, NONE, RIGHT_UP = 7, 1, 3, 5, 4, 6
 EPSILON = 10.0
@@ -248,3 +251,24 @@ def test_config_rejects_nonsense() -> None:
         CentringConfig(epsilon_px=10, stop_margin_px=10)
     with pytest.raises(ValueError, match="max_refinements"):
         CentringConfig(epsilon_px=10, max_refinements=-1)
+
+
+class _StreamLikeCamera(FakeCamera):
+    """Frames stamped with their arrival on the wall clock, one per 20 ms, as from a stream."""
+
+    def read(self, timeout_s: float | None = None) -> Frame:
+        time.sleep(0.02)
+        frame = super().read(timeout_s)
+        return Frame(frame.image, time.monotonic(), frame.frame_number)
+
+
+def test_fresh_frame_s_reads_until_a_frame_arrived_that_long_after_the_observation_began() -> None:
+    loop = make_loop(FakeVehicle.at_pose(east_m=0.05, up_m=-0.05), FakePlanner([RIGHT]), fresh_frame_s=0.1)
+    loop.camera = _StreamLikeCamera()
+    began = time.monotonic()
+    frame = loop.run().steps[0].frame
+    assert frame.timestamp_s >= began + 0.1 and loop.camera.count >= 5  # ~0.1 s / 20 ms
+    plain = make_loop(FakeVehicle.at_pose(east_m=0.05, up_m=-0.05), FakePlanner([RIGHT]))
+    plain.camera = _StreamLikeCamera()
+    plain.run()
+    assert plain.camera.count == 1  # 0 (the default): the newest frame, as before

@@ -25,6 +25,7 @@ from controller.missions.benchmark import BenchmarkConfig, format_summary, run_b
 from controller.missions.report import ReportFolderError
 from controller.missions.schema import FaultSpec
 from core.parallel import RayUnavailableError, add_ray_option
+from core.sim_speed import parse_sim_speed
 from sim_world.px4_bridge.px4_process import Px4FolderError, find_px4_dir
 
 
@@ -52,13 +53,11 @@ def faults_from_args(args: argparse.Namespace) -> dict[str, Any] | None:
     return faults or None
 
 
-def _speed(text: str) -> float | str:
-    if text.strip().lower() == "max":
-        return "max"
+def _speed(option: str, text: str) -> float | str:
     try:
-        return float(text)
-    except ValueError:
-        raise ValueError(f"--px4-speed must be a number or 'max', got {text!r}") from None
+        return parse_sim_speed(text)
+    except ValueError as exc:
+        raise ValueError(f"{option}: {exc}") from None
 
 
 def main(argv: list[str]) -> int:
@@ -79,6 +78,11 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--px4", help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
     parser.add_argument(
         "--px4-speed", default="max", help="px4-sitl: simulation speed, a factor or 'max' (default: max)"
+    )
+    parser.add_argument(
+        "--sim-speed",
+        default="1",
+        help="sim-mavlink: the sim-vehicle's speed, a factor (1 = real time, the default) or 'max'",
     )
     parser.add_argument("--checkpoint", help="latent planner checkpoint folder (default: the shipped one)")
     parser.add_argument("--max-steps", type=int, default=20, help="step budget per mission (default: 20)")
@@ -164,7 +168,8 @@ def main(argv: list[str]) -> int:
             vehicle=args.vehicle, max_steps=args.max_steps, epsilon_px=args.epsilon_px,
             checkpoint=args.checkpoint, detector=args.detector, parallel=args.parallel,
             detector_checkpoint=args.detector_checkpoint, scale_moves=not args.fixed_moves,
-            px4_dir=args.px4, px4_speed=_speed(args.px4_speed), faults=faults_from_args(args),
+            px4_dir=args.px4, px4_speed=_speed("--px4-speed", args.px4_speed), faults=faults_from_args(args),
+            sim_speed=_speed("--sim-speed", args.sim_speed),
             rerun=args.rerun, ray=args.ray, targets=args.targets, twins=args.twins,
             instructions=args.instructions, absent=args.absent,
         )  # fmt: skip

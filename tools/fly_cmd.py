@@ -40,7 +40,7 @@ DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "default.ya
 
 def _overrides(args: argparse.Namespace) -> dict[str, Any]:
     out: dict[str, Any] = {}
-    for key in ("planner", "checkpoint", "epsilon_px", "max_steps", "vehicle", "camera"):
+    for key in ("planner", "checkpoint", "epsilon_px", "max_steps", "vehicle", "camera", "sim_speed"):
         value = getattr(args, key)
         if value is not None:
             out[key] = value
@@ -113,6 +113,11 @@ def main(argv: list[str]) -> int:
     parser.add_argument(
         "--px4-speed",
         help="px4-sitl: simulated seconds per wall second, or 'max' (default: the mission's, 1)",
+    )
+    parser.add_argument(
+        "--sim-speed",
+        help="sim-mavlink: the sim-vehicle's simulated seconds per wall second, or 'max' (default: the "
+        "mission's, 1)",
     )
     parser.add_argument("--camera", help="override the camera: sim or a stream URL")
     parser.add_argument(

@@ -13,6 +13,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from core.sim_speed import MAX_SPEED, parse_sim_speed
 from sim_world.px4_bridge.bridge import BridgeTiming
 from sim_world.px4_bridge.geodesy import HomePoint
 from sim_world.px4_bridge.px4_process import MAX_INSTANCE, Px4FolderError, find_px4_dir
@@ -24,16 +25,12 @@ from sim_world.vehicle.serve import StartPose
 
 
 def parse_speed(text: str) -> float | None:
-    """`max` (as fast as possible) or a positive factor."""
-    if text.strip().lower() == "max":
-        return None
+    """`max` (None: lockstep as fast as PX4 and the physics go) or a factor (`core.sim_speed`)."""
     try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"speed must be a number or 'max', got {text!r}") from None
-    if not 0.05 <= value <= 100.0:
-        raise argparse.ArgumentTypeError(f"speed must be in [0.05, 100] or 'max', got {value:g}")
-    return value
+        speed = parse_sim_speed(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return None if speed == MAX_SPEED else float(speed)
 
 
 def _home(text: str) -> HomePoint:

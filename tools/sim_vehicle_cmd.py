@@ -10,11 +10,19 @@ import argparse
 import sys
 from pathlib import Path
 
+from core.sim_speed import SimSpeed, parse_sim_speed
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.params import ParamError, parse_param_overrides
 from sim_world.vehicle.serve import SimVehicleRun, StartPose, serve
+
+
+def _speed(text: str) -> SimSpeed:
+    try:
+        return parse_sim_speed(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -32,7 +40,13 @@ def _parser() -> argparse.ArgumentParser:
     net.add_argument("--video-fps", type=float, default=15.0, help="camera frames per second (default 15)")
     net.add_argument("--no-video", action="store_true", help="serve no camera (saves the rendering CPU)")
     sim = ap.add_argument_group("simulation")
-    sim.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
+    sim.add_argument(
+        "--speed",
+        type=_speed,
+        default=1.0,
+        help="simulated seconds per wall second (0.05..100, default 1), or 'max': physics as fast as "
+        "it steps; above 1 the setpoint-loss and preflight-disarm timers also count wall time",
+    )
     sim.add_argument("--scene", type=Path, help="scene YAML file (default: the built-in scene)")
     sim.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
     sim.add_argument("--size", type=int, default=224, help="camera image size in pixels (default 224)")

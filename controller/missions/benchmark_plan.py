@@ -70,6 +70,8 @@ class BenchmarkConfig:
     px4_dir: str | None = None
     """PX4 SITL build folder for `px4-sitl` (None: $PX4_SITL_DIR)."""
     px4_speed: float | str = "max"
+    sim_speed: float | str = 1.0
+    """sim-mavlink: the sim-vehicle's speed, a factor or "max" (the missions' `sim_speed`)."""
     faults: dict[str, Any] | None = None
     """Injected faults, the `faults:` section of a mission file (seeded per mission by its scene seed)."""
     ray: str | None = None
@@ -93,6 +95,8 @@ class BenchmarkConfig:
             raise ValueError("twins need targets >= 2 (the named one and its twin)")
         if self.instructions is not None and self.instructions not in CORPORA:
             raise ValueError(f"instructions must be one of {CORPORA}, got {self.instructions!r}")
+        if self.sim_speed != 1.0 and self.vehicle != SIM_MAVLINK:
+            raise ValueError(f"sim_speed goes with vehicle {SIM_MAVLINK!r} (px4-sitl: px4_speed)")
         if not 0.0 <= self.absent <= 1.0:
             raise ValueError(f"absent must be a fraction in [0, 1], got {self.absent:g}")
 
@@ -151,6 +155,7 @@ def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozen
                 mavlink_udp=config.udp_port_base + UDP_PORTS_PER_MISSION * slot,
                 http=config.http_port_base + slot,
             ).model_dump(),
+            **({"sim_speed": config.sim_speed} if config.vehicle == SIM_MAVLINK else {}),
             **({"px4": {"dir": config.px4_dir, "speed": config.px4_speed, "keep_ulog": False}}
                if config.vehicle == PX4_SITL else {}),
             **({"faults": {**config.faults, "seed": seed}} if config.faults else {}),

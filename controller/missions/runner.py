@@ -41,6 +41,10 @@ from flight.signals import StopRequested
 
 log = logging.getLogger(__name__)
 
+FAST_SIM_FRESH_FRAME_S = 0.1
+"""A sim-vehicle off real time: a frame must arrive this long after an observation begins (render,
+JPEG and HTTP take a few tens of ms of wall time, which at ×8 are a few tenths of a simulated second)."""
+
 
 def epsilon_for(mission: Mission, kit: FlightKit) -> float:
     """ε for this flight: the kit's (tests fix it), else the mission's, else the default for the width."""
@@ -57,6 +61,7 @@ def loop_config(
         max_steps=mission.max_steps,
         timeout_s=mission.timeout_s,
         stop_margin_px=mission.stop_margin_px,
+        **({"fresh_frame_s": FAST_SIM_FRESH_FRAME_S} if mission.sim_speed != 1.0 else {}),
         **mission.loop.as_kwargs(),
     )
 

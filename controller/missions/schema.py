@@ -28,6 +28,7 @@ timeout_s: 120
 wind: {mean_enu_m_s: [0.3, 0, 0], gust_std_m_s: 0.2}
 loop: {max_move_m: 1.0}          # CentringConfig overrides (move scheme, refinement budget, ...)
 expect: {outcome: centred, max_steps: 12, final_offset_px: 10}
+sim_speed: 1.0                   # vehicle: sim-mavlink only: simulated s per wall s, or max
 px4: {instance: auto, speed: 1.0}  # vehicle: px4-sitl only (the PX4 folder: --px4 or $PX4_SITL_DIR)
 ```
 
@@ -56,6 +57,7 @@ from pydantic import (
 from controller.missions.schema_specs import FaultSpec, PortSpec, Px4Spec
 from controller.planning.grounding import parse_instruction
 from core.config_files import ConfigFileError, Range, StrictModel, read_yaml, validate_mapping
+from core.sim_speed import parse_sim_speed
 from core.targets import ATTRIBUTE_COLOURS
 from flight.errors import ConnectionUrlError
 from flight.urls import validate_connection_url
@@ -233,8 +235,16 @@ class Mission(StrictModel):
     loop: LoopOverrides = LoopOverrides()
     expect: Expectations = Expectations()
     ports: PortSpec = PortSpec()
+    sim_speed: float | Literal["max"] = 1.0
+    """sim-mavlink: the sim-vehicle's speed (`sim_world.vehicle.config.parse_sim_speed`); the controller
+    then times its moves on the vehicle's clock."""
     px4: Px4Spec = Px4Spec()
     faults: FaultSpec = FaultSpec()
+
+    @field_validator("sim_speed", mode="before")
+    @classmethod
+    def _sim_speed(cls, value: float | str) -> float | str:
+        return parse_sim_speed(value)
 
     @field_validator("target_attribute")
     @classmethod
@@ -295,6 +305,10 @@ class Mission(StrictModel):
             raise ValueError(
                 f"camera: the simulated vehicle {self.vehicle!r} streams its own camera; use camera: sim "
                 "(a camera URL goes with a real vehicle's MAVLink URL)"
+            )
+        if self.sim_speed != 1.0 and self.vehicle != SIM_MAVLINK:
+            raise ValueError(
+                f"sim_speed: goes with vehicle sim-mavlink, not {self.vehicle!r} (px4-sitl: px4.speed)"
             )
         if self.is_real and self.detector == "truth":
             raise ValueError("detector: 'truth' needs the simulator; a real vehicle uses the image detector")

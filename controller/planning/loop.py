@@ -90,11 +90,11 @@ from controller.planning.loop_records import (
 from controller.planning.planners import Observation, Planner
 from core.centring import default_stop_margin_px, is_centred, offset_px
 from flight.moves import MoveResult, fly_offset
-from flight.vehicle import Vehicle
+from flight.vehicle import Deadline, Vehicle
 from perception.camera import Camera
 from perception.detector import Detector
 from perception.errors import CameraFrozenError
-from perception.types import Detection
+from perception.types import Detection, Frame
 
 log = logging.getLogger(__name__)
 
@@ -285,9 +285,9 @@ class CentringLoop:
         if before is None or not np.array_equal(record.frame.image, before):
             return record
         cfg = self.config
-        deadline = self.vehicle.time_s() + cfg.frame_timeout_s
+        deadline = Deadline(self.vehicle, cfg.frame_timeout_s)  # frames come at wall-clock rates
         log.warning("camera picture unchanged after a move: waiting for a fresh one")
-        while self.vehicle.time_s() < deadline:
+        while not deadline.expired():
             self.vehicle.sleep(cfg.settle_s)
             record = self._observe(index)
             if not np.array_equal(record.frame.image, before):
@@ -299,7 +299,7 @@ class CentringLoop:
 
     def _observe(self, index: int) -> StepRecord:
         t0 = time.perf_counter()
-        frame = self.camera.read(self.config.frame_timeout_s)
+        frame = self._read_fresh()
         telemetry = self.vehicle.telemetry()
         vehicle_time_s = self.vehicle.time_s()
         truth = self.truth_probe() if self.truth_probe is not None else None
@@ -342,6 +342,16 @@ class CentringLoop:
                 f"(for {width} px wide images): give a larger epsilon_px or a smaller stop_margin_px"
             )
         return cfg.epsilon_px - margin
+
+    def _read_fresh(self) -> Frame:
+        """The camera's next frame, re-read until one arrived `fresh_frame_s` after this call (bounded)."""
+        cfg = self.config
+        wanted_s = time.monotonic() + cfg.fresh_frame_s
+        frame = self.camera.read(cfg.frame_timeout_s)
+        give_up_s = wanted_s + cfg.frame_timeout_s  # a camera whose stamps are not this clock's
+        while cfg.fresh_frame_s > 0 and frame.timestamp_s < wanted_s and time.monotonic() < give_up_s:
+            frame = self.camera.read(cfg.frame_timeout_s)
+        return frame
 
     def _fly(self, right_m: float, up_m: float) -> MoveResult:
         cfg = self.config

@@ -50,6 +50,10 @@ class CentringConfig:
     settle_speed_m_s: float = 0.08
     settle_timeout_s: float = 4.0
     frame_timeout_s: float = 5.0
+    fresh_frame_s: float = 0.0
+    """Observe only a frame that arrived this long (wall clock) after the observation began: a stream
+    (render, encode, transport) shows the vehicle as it was a little earlier, which a vehicle faster
+    than real time makes k times longer on its clock. 0: the newest frame since the last read."""
     max_stalls: int = 3
     lost_rereads: int = 2
     lost_recoveries: int = 1
@@ -93,6 +97,8 @@ class CentringConfig:
         for name in ("timeout_s", "speed_m_s", "settle_speed_m_s", "settle_timeout_s", "frame_timeout_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.fresh_frame_s < 0:
+            raise ValueError(f"fresh_frame_s must be >= 0, got {self.fresh_frame_s}")
         if self.settle_s < 0:
             raise ValueError(f"settle_s must be >= 0, got {self.settle_s}")
 

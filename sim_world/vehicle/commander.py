@@ -18,6 +18,11 @@ do (../shared/MAVLINK_NOTES.md):
 - takeoff climbs to MIS_TAKEOFF_ALT and ends in AUTO.LOITER;
 - auto-disarm COM_DISARM_LAND after landing, COM_DISARM_PRFLT after an arm without
   takeoff; disarm in the air refused unless forced;
+- timers that wait on the client (the setpoint stream's age for OFFBOARD and COM_OF_LOSS_T,
+  COM_DISARM_PRFLT waiting for a takeoff) run on the client's clock too when one is given
+  (`client_clock`: a vehicle faster than real time flown by a wall-clock client such as
+  MAVSDK, which re-sends setpoints at 20 Hz of wall time): an age counts as the smaller of
+  the simulated and the wall age, so ×k never turns 50 ms between two setpoints into a loss;
 - after a disarm the mode reverts to the last mode the client asked for with
   DO_SET_MODE (NAV_LAND and failsafes do not change it: after OFFBOARD → land the
   vehicle is back in OFFBOARD and the next arm is denied, as on PX4).
@@ -28,6 +33,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 
@@ -76,8 +82,15 @@ class FailsafeStage(Enum):
 class Commander:
     """The vehicle's mode and arming state machine over a `VehicleModel`."""
 
-    def __init__(self, model: VehicleModel, params: ParameterStore, config: CommanderConfig | None = None):
+    def __init__(
+        self,
+        model: VehicleModel,
+        params: ParameterStore,
+        config: CommanderConfig | None = None,
+        client_clock: Callable[[], float] | None = None,
+    ):
         self._model = model
+        self._client_clock = client_clock
         self._params = params
         self.config = config or CommanderConfig()
         self.texts: deque[tuple[int, str]] = deque(maxlen=64)  # (MAV_SEVERITY, text) to send
@@ -87,7 +100,9 @@ class Commander:
         self.failsafe = FailsafeStage.NONE
         self._failsafe_since_s = 0.0
         self._setpoint: VelocitySetpoint | None = None
+        self._setpoint_client_s = 0.0  # when the latest setpoint came, on the client's clock
         self._armed_at_s = 0.0
+        self._armed_at_client_s = 0.0
         self._has_flown = False
         self._landed_since_s: float | None = None
         self._was_taking_off = False
@@ -124,9 +139,27 @@ class Commander:
             return mavlink.MAV_LANDED_STATE_LANDING
         return mavlink.MAV_LANDED_STATE_IN_AIR
 
-    def setpoint_stream_ok(self) -> bool:
+    def setpoint_age_s(self) -> float:
+        """How old the latest setpoint is (inf without one): simulated, or the smaller of the simulated
+        and the client's clock with a `client_clock`."""
         sp = self._setpoint
-        return sp is not None and self._model.time_s - sp.received_s <= self.config.offboard_stream_max_age_s
+        if sp is None:
+            return math.inf
+        return self._client_age(self._model.time_s - sp.received_s, self._setpoint_client_s)
+
+    def last_setpoint_at(self) -> tuple[float, float] | None:
+        """(simulated, client clock) time of the latest setpoint; None without one or a client clock."""
+        if self._setpoint is None or self._client_clock is None:
+            return None
+        return self._setpoint.received_s, self._setpoint_client_s
+
+    def _client_age(self, sim_age_s: float, client_since_s: float) -> float:
+        if self._client_clock is None:
+            return sim_age_s
+        return min(sim_age_s, self._client_clock() - client_since_s)
+
+    def setpoint_stream_ok(self) -> bool:
+        return self.setpoint_age_s() <= self.config.offboard_stream_max_age_s
 
     def say(self, severity: int, text: str) -> None:
         log.info("STATUSTEXT %s", text)
@@ -149,6 +182,7 @@ class Commander:
             self.say(mavlink.MAV_SEVERITY_CRITICAL, f"Arming denied: {exc}")
             return DENIED
         self._armed_at_s = self._model.time_s
+        self._armed_at_client_s = self._client_clock() if self._client_clock is not None else 0.0
         self._has_flown = False
         self._landed_since_s = None
         self.say(mavlink.MAV_SEVERITY_INFO, "Armed by external command")
@@ -209,6 +243,7 @@ class Commander:
     def on_setpoint(self, setpoint: VelocitySetpoint) -> None:
         """A decoded SET_POSITION_TARGET_LOCAL_NED: kept, and flown when in OFFBOARD."""
         self._setpoint = setpoint
+        self._setpoint_client_s = self._client_clock() if self._client_clock is not None else 0.0
         if self.mode == modes.OFFBOARD and self.armed:
             self._apply_setpoint()
 
@@ -221,7 +256,7 @@ class Commander:
             return
         if self.mode == modes.OFFBOARD:
             sp = self._setpoint
-            if sp is None or now - sp.received_s > self._params.get("COM_OF_LOSS_T"):
+            if sp is None or self.setpoint_age_s() > self._params.get("COM_OF_LOSS_T"):
                 self._trigger_failsafe(now)
             elif sp.yaw_deg is not None:
                 self._apply_setpoint()
@@ -331,10 +366,11 @@ class Commander:
             if self._has_flown:
                 self.say(mavlink.MAV_SEVERITY_INFO, "Landing detected")
         if self._has_flown:
-            delay, since, why = self._params.get("COM_DISARM_LAND"), self._landed_since_s, "landing"
-        else:
-            delay, since, why = self._params.get("COM_DISARM_PRFLT"), self._armed_at_s, "no takeoff"
-        if delay >= 0 and now - since >= delay:
+            delay, age, why = self._params.get("COM_DISARM_LAND"), now - self._landed_since_s, "landing"
+        else:  # waiting for the client to take off: on the client's clock too
+            delay, why = self._params.get("COM_DISARM_PRFLT"), "no takeoff"
+            age = self._client_age(now - self._armed_at_s, self._armed_at_client_s)
+        if delay >= 0 and age >= delay:
             self._disarm(f"Disarmed by auto disarm ({why})", force=False)
 
     def _disarm(self, text: str, force: bool) -> None:

@@ -9,9 +9,9 @@ system id is 1 + N, as PX4 SITL's MAV_SYS_ID for instance N.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
+from core.sim_speed import MAX_SPEED, SimSpeed, parse_sim_speed
 from sim_world.vehicle.battery import BatteryConfig
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.telemetry import HomePoint
@@ -31,7 +31,7 @@ class SimVehicleConfig:
     remote_port: int | None = None
     local_port: int | None = None
     sysid: int | None = None
-    speed: float = 1.0  # simulated seconds per wall second
+    speed: SimSpeed = 1.0  # simulated seconds per wall second, or "max" (see `parse_sim_speed`)
     commander: CommanderConfig = field(default_factory=CommanderConfig)
     params: dict[str, float] = field(default_factory=dict)  # PX4 parameter overrides at boot
     home: HomePoint = field(default_factory=HomePoint)
@@ -41,12 +41,18 @@ class SimVehicleConfig:
     video_host: str = "127.0.0.1"
     video_fps: float = 15.0
     max_catch_up_s: float = 0.25  # more lag than this and the loop drops time instead of racing
+    max_batch_sim_s: float = 1.0 / 60.0  # speed "max": physics per loop turn between link services
+    lockstep_lead_s: float = 0.1  # speed "max" in OFFBOARD: simulated lead over the last setpoint
+    lockstep_silence_s: float = 0.25  # ... until the setpoint stream is this silent (wall)
+    max_telemetry_hz: float = 250.0  # faster than real time: the cap on the sped-up clock streams
 
     def __post_init__(self) -> None:
         if not 0 <= self.instance <= 99:
             raise ValueError(f"SimVehicleConfig.instance must be 0..99, got {self.instance}")
-        if not (math.isfinite(self.speed) and 0.05 <= self.speed <= 100.0):
-            raise ValueError(f"SimVehicleConfig.speed must be in [0.05, 100], got {self.speed}")
+        try:
+            object.__setattr__(self, "speed", parse_sim_speed(self.speed))
+        except ValueError as exc:
+            raise ValueError(f"SimVehicleConfig.{exc}") from None
         if not 0.5 <= self.video_fps <= 60.0:
             raise ValueError(f"SimVehicleConfig.video_fps must be in [0.5, 60], got {self.video_fps}")
         for name in ("remote_port", "local_port", "video_port"):
@@ -55,6 +61,11 @@ class SimVehicleConfig:
                 raise ValueError(f"SimVehicleConfig.{name} must be a UDP/TCP port, got {port}")
         if self.sysid is not None and not 1 <= self.sysid <= 254:
             raise ValueError(f"SimVehicleConfig.sysid must be 1..254, got {self.sysid}")
+
+    @property
+    def faster_than_real_time(self) -> bool:
+        """Whether the simulated clock outruns the wall clock (a factor above 1, or "max")."""
+        return self.speed == MAX_SPEED or float(self.speed) > 1.0
 
     @property
     def mavlink_remote_port(self) -> int:

@@ -3,9 +3,10 @@
 One background thread owns the airframe (`VehicleModel`: the PyBullet `World` in
 production, a kinematic fake in unit tests) and runs the loop PX4 SITL runs in
 lockstep with its simulator: step the physics to keep up with the wall clock (×
-`speed`), apply PX4's commander rules, answer every message, stream telemetry at
-the requested rates, and hand the drone's pose to the camera feed (which renders
-and serves MJPEG in its own process: see `sim_world.vehicle.video`).
+`speed`; with "max", one batch of `max_batch_sim_s` after another, as fast as the thread
+goes, serving the link between batches), apply PX4's commander rules, answer every
+message, stream telemetry at the requested (wall-clock) rates, and hand the drone's
+pose to the camera feed (which renders and serves MJPEG in its own process: see `sim_world.vehicle.video`).
 
 Use in-process (tests) as `with SimVehicle(model, config) as v: ...`, or through
 `dronectl sim-vehicle` (`sim_world.vehicle.serve`).
@@ -14,6 +15,7 @@ Use in-process (tests) as `with SimVehicle(model, config) as v: ...`, or through
 from __future__ import annotations
 
 import logging
+import math
 import select
 import threading
 import time
@@ -23,10 +25,11 @@ from typing import Protocol
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sim_world.vehicle import px4_modes as modes
 from sim_world.vehicle.battery import BatteryModel
 from sim_world.vehicle.commander import Commander
 from sim_world.vehicle.commands import MessageHandler
-from sim_world.vehicle.config import SimVehicleConfig
+from sim_world.vehicle.config import MAX_SPEED, SimVehicleConfig
 from sim_world.vehicle.link import UdpMavlinkLink
 from sim_world.vehicle.model import VehicleModel
 from sim_world.vehicle.params import ParameterStore
@@ -102,7 +105,10 @@ class SimVehicle:
         self._model = model
         self._video = video
         self.params = ParameterStore(overrides=self.config.params)
-        self.commander = Commander(model, self.params, self.config.commander)
+        # Faster than real time, the client (MAVSDK: setpoints re-sent at 20 Hz of wall time) is timed
+        # on the wall clock: the commander's timers that wait on it use that clock too.
+        client_clock = time.monotonic if self.config.faster_than_real_time else None
+        self.commander = Commander(model, self.params, self.config.commander, client_clock)
         self._battery = BatteryModel(self.config.battery)
         self._builder = TelemetryBuilder(self.config.home, uid=0x5157_0000 + self.config.instance)
         self._boot_s = model.time_s
@@ -222,7 +228,7 @@ class SimVehicle:
         cfg, model, link = self.config, self._model, self._link
         assert link is not None
         dt = 1.0 / model.physics_hz
-        scheduler = MessageScheduler(DEFAULT_RATES_HZ, time.monotonic())
+        scheduler = MessageScheduler(telemetry_rates_hz(cfg), time.monotonic())
         handler = MessageHandler(
             self.commander, self.params, scheduler, self._builder, self._take_snapshot,
             cfg.system_id, cfg.home.altitude_amsl_m,
@@ -230,13 +236,23 @@ class SimVehicle:
         wall0 = start_wall = time.monotonic()
         sim0 = model.time_s
         text_id = 0
+        flat_out = cfg.speed == MAX_SPEED
+        speed = 1.0 if flat_out else float(cfg.speed)
+        max_batch = max(1, round(cfg.max_batch_sim_s * model.physics_hz))
+        announce = cfg.faster_than_real_time  # state changes go out at once (`_STATE_MESSAGES`)
+        last_state = _state_key(self._snapshot)
         while not self._stop.is_set():
             now = time.monotonic()
-            # 1. physics: catch up with the wall clock (× speed), dropping time after a long stall
-            lag_s = sim0 + cfg.speed * (now - wall0) - model.time_s
-            dropped = max(0.0, lag_s - cfg.max_catch_up_s * cfg.speed)
-            wall0 += dropped / cfg.speed
-            steps = int((lag_s - dropped) / dt + 1e-9)
+            if flat_out:  # 1. physics: one batch, or what the lockstep bound leaves, then serve the link
+                limit_s = self._lockstep_limit_s(now)
+                steps, dropped = max_batch, 0.0
+                if limit_s is not None:
+                    steps = min(steps, max(0, int((limit_s - model.time_s) / dt + 1e-9)))
+            else:  # 1. physics: catch up with the wall clock (× speed), dropping time after a long stall
+                lag_s = sim0 + speed * (now - wall0) - model.time_s
+                dropped = max(0.0, lag_s - cfg.max_catch_up_s * speed)
+                wall0 += dropped / speed
+                steps = int((lag_s - dropped) / dt + 1e-9)
             if steps > 0:
                 model.step(steps)
                 self._battery.update(steps * dt, self.commander.armed, not model.status().landed)
@@ -250,6 +266,9 @@ class SimVehicle:
             # 3. telemetry and status texts to every destination
             due = scheduler.due(now)
             self._snapshot = snap = self._take_snapshot()
+            if announce and (state := _state_key(snap)) != last_state:
+                last_state = state
+                due = sorted(set(due) | set(_STATE_MESSAGES))
             for msg_id in due:
                 link.send(self._builder.build(msg_id, snap))
             while self.commander.texts:
@@ -265,8 +284,20 @@ class SimVehicle:
                 st.sim_s = model.time_s - sim0
                 st.messages_in, st.messages_out = link.stats.received, link.stats.sent
             # 4. sleep until the next physics step or telemetry is due, or a message arrives
-            wake = min(wall0 + (model.time_s + dt - sim0) / cfg.speed, scheduler.next_due_s())
+            if flat_out:  # held by the lockstep bound: wait for the client's next setpoint
+                select.select([link], [], [], 0.0 if steps else _MIN_WAIT_S * 4)
+                continue
+            wake = min(wall0 + (model.time_s + dt - sim0) / speed, scheduler.next_due_s())
             select.select([link], [], [], min(max(wake - time.monotonic(), _MIN_WAIT_S), _MAX_WAIT_S))
+
+    def _lockstep_limit_s(self, now_s: float) -> float | None:
+        """Speed "max": in OFFBOARD, the simulated time the vehicle may not pass until the client's next
+        setpoint (the last one's + `lockstep_lead_s`); None (free) elsewhere, and once the stream has
+        been silent `lockstep_silence_s` of wall time (a stopped client must still meet the failsafe)."""
+        last = self.commander.last_setpoint_at() if self.commander.mode == modes.OFFBOARD else None
+        if last is None or now_s - last[1] > self.config.lockstep_silence_s:
+            return None
+        return last[0] + self.config.lockstep_lead_s
 
     def _take_snapshot(self) -> VehicleSnapshot:
         c, b = self.commander, self._battery
@@ -283,6 +314,32 @@ class SimVehicle:
             battery_current_a=b.current_a,
             battery_consumed_mah=b.consumed_mah,
         )
+
+
+_CLOCK_STREAMS = (mavlink.MAVLINK_MSG_ID_ATTITUDE, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
+
+
+def telemetry_rates_hz(config: SimVehicleConfig) -> dict[int, float]:
+    """PX4's stream rates (wall clock); faster than real time, ATTITUDE (whose time_boot_ms is a
+    client's clock of the vehicle) and LOCAL_POSITION_NED go up with the speed, to at most
+    `max_telemetry_hz`, so that a client timing a move on the vehicle's clock stops it within
+    about as many simulated milliseconds as at ×1."""
+    rates = dict(DEFAULT_RATES_HZ)
+    if config.faster_than_real_time:
+        factor = math.inf if config.speed == MAX_SPEED else float(config.speed)
+        for msg_id in _CLOCK_STREAMS:
+            rates[msg_id] = max(rates[msg_id], min(rates[msg_id] * factor, config.max_telemetry_hz))
+    return rates
+
+
+_STATE_MESSAGES = (mavlink.MAVLINK_MSG_ID_HEARTBEAT, mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE)
+"""Faster than real time, a change of arming, mode, status or landed state is sent at once: a client
+timing its waits on the vehicle's clock (×k) would otherwise wait up to k simulated seconds for the
+1 Hz HEARTBEAT (PX4's rate, in wall time) that shows the mode it asked for."""
+
+
+def _state_key(snap: VehicleSnapshot) -> tuple[object, ...]:
+    return (snap.armed, snap.mode, snap.system_status, snap.landed_state)
 
 
 def _statustext(severity: int, text: str, text_id: int) -> list[mavlink.MAVLink_message]:

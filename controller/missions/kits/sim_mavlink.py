@@ -36,9 +36,10 @@ READY_TIMEOUT_S = 60.0
 
 
 def sim_vehicle_run(mission: Mission, start: StartOffset, system_id: int) -> SimVehicleRun:
-    """The sim-vehicle for a mission: real time, PX4's boot rules, landed below the start pose."""
+    """The sim-vehicle for a mission: `mission.sim_speed`, PX4's boot rules, landed below the start pose."""
     p = mission.ports.mavlink_udp
     vehicle = SimVehicleConfig(
+        speed=mission.sim_speed,
         local_port=p,
         remote_port=p + 1,
         sysid=system_id,
@@ -74,8 +75,12 @@ def open_sim_mavlink_kit(
             )
         )  # fmt: skip
         truth = SimTruth(sim.ready["truth_url"])
+        # Off real time, the controller times its moves, settling and waits on the vehicle's clock.
+        clock = "wall" if mission.sim_speed == 1.0 else "vehicle"
         vehicle = stack.enter_context(
-            MavsdkVehicle(MavsdkConfig(url=f"udpin://127.0.0.1:{p + 2}", expected_system_id=system_id))
+            MavsdkVehicle(
+                MavsdkConfig(url=f"udpin://127.0.0.1:{p + 2}", expected_system_id=system_id, clock=clock)
+            )
         )
         camera = stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
         yield simulated_mavlink_kit(
@@ -85,6 +90,7 @@ def open_sim_mavlink_kit(
                 "ports": {"sim_udp": p, "tlog_relay_udp": p + 1, "mavsdk_udp": p + 2, "video_http": http},
                 "tlog": "recorded by flight.relay between sim-vehicle and MAVSDK",
                 "system_id": system_id,
+                "sim_speed": mission.sim_speed,
                 "simulator_pid": sim.pid,
             },
             tlog_path=tlog.path,
