@@ -64,6 +64,7 @@ def test_train_command_help_renders_and_cpu_is_the_default_preset() -> None:
     assert parser.parse_args(["--data", "d", "--out", "o"]).preset == "cpu"
 
 
+@pytest.mark.timeout(900)  # ~70 s on an idle core; several times that beside a loaded machine
 def test_grounded_training_plans_toward_the_target_the_words_name(tmp_path: Path) -> None:
     """Two targets per image: asked for the named one, the model's moves follow the named one's offset,
     not the other's, so it must read the words (a model that ignores them scores ~half of this)."""
