@@ -23,8 +23,7 @@ from controller.planning.actions import label_from_offset
 from controller.planning.latent.errors import TrainingDataError
 from core.centring import default_epsilon_px
 from core.dataset import DatasetError as ManifestError
-from core.dataset import load_manifest, read_rgb
-from core.targets import colour_name
+from core.dataset import load_manifest, read_rgb, row_targets
 
 log = logging.getLogger(__name__)
 
@@ -117,27 +116,16 @@ def load_index(root: Path) -> DatasetIndex:
 
 
 def _target_refs(raw: dict[str, Any]) -> tuple[TargetRef, ...]:
-    """Every target of a manifest row, named first: its `targets` list, or the named target alone
-    (a dataset written before multi-target scenes; the colour then comes from the scene parameters)."""
-    listed = raw.get("targets")
-    if isinstance(listed, list) and listed:
-        refs = []
-        for t in listed:
-            off = t.get("offset_px") or (float("nan"), float("nan"))
-            refs.append(
-                TargetRef(
-                    str(t["kind"]), t.get("attribute"), (float(off[0]), float(off[1])), bool(t.get("in_view"))
-                )
-            )
-        named = int(raw.get("named", 0))
-        return (refs[named], *refs[:named], *refs[named + 1 :])
-    bezel = ((raw.get("scene") or {}).get("target") or {}).get("bezel_colour")
-    off = raw["offset_px"] or (float("nan"), float("nan"))
-    attribute = colour_name(bezel) if isinstance(bezel, str) else None
-    named = TargetRef(
-        str(raw["target_kind"]), attribute, (float(off[0]), float(off[1])), bool(raw["in_view"])
-    )
-    return (named,)
+    """Every target of a manifest row (`core.dataset.row_targets`, which also reads rows from before
+    several-target scenes), the named one first."""
+    listed = row_targets(raw)
+    named = int(raw.get("named", 0))
+    refs = [
+        TargetRef(str(t["kind"]), t.get("attribute"), (float(t["offset_px"][0]), float(t["offset_px"][1])),
+                  bool(t["in_view"]))
+        for t in listed
+    ]  # fmt: skip
+    return (refs[named], *refs[:named], *refs[named + 1 :])
 
 
 def _row(raw: dict[str, Any], root: Path) -> Row:

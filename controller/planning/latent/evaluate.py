@@ -25,7 +25,7 @@ from controller.planning.latent.data import ImageSet, TargetRef, load_images, lo
 from controller.planning.latent.errors import InstructionError
 from controller.planning.latent.instructions import builtin_templates, fill, read_templates
 from controller.planning.latent.model import LatentDynamicsModel
-from controller.planning.latent.pairs import target_name_for
+from controller.planning.latent.pairs import named_target_name
 from controller.planning.latent.phrasing import describe, is_kind_phrase_file, read_kind_phrases
 from controller.planning.latent.tokenizer import InstructionTokenizer
 
@@ -139,11 +139,7 @@ def pair_described(
     """One instruction per image asking for its named target by a synonym of `corpus`, with its
     colour where another target of its kind is in view (seeded)."""
     rng = np.random.default_rng(seed)
-    out = []
-    for refs in targets:
-        visible = [t for t in refs if t.in_view] or [refs[0]]
-        out.append(describe(target_name_for(refs[0], visible, False), templates, corpus, rng))
-    return out
+    return [describe(named_target_name(refs, False), templates, corpus, rng) for refs in targets]
 
 
 def pair_kind_phrases(kinds: Sequence[str], phrases: dict[str, list[str]], seed: int) -> list[str]:
@@ -188,7 +184,12 @@ def _words(ckpt: LoadedCheckpoint, setting: str) -> tuple[list[str], str]:
 
 
 def _presence(
-    ckpt: LoadedCheckpoint, data: ImageSet, empty: ImageSet | None, setting: str, seed: int
+    ckpt: LoadedCheckpoint,
+    data: ImageSet,
+    instructions: Sequence[str],
+    empty: ImageSet | None,
+    setting: str,
+    seed: int,
 ) -> dict[str, float | int]:
     from controller.planning.latent.presence_eval import (
         absent_instructions,
@@ -198,7 +199,7 @@ def _presence(
     )
 
     templates, corpus = _words(ckpt, setting)
-    p_present = presence_probabilities(ckpt, data.images, instructions_for(ckpt, data, setting, seed))
+    p_present = presence_probabilities(ckpt, data.images, instructions)
     negatives = [
         presence_probabilities(ckpt, data.images, absent_instructions(data, templates, corpus, seed + 1))
     ]
@@ -210,9 +211,15 @@ def _presence(
 
 
 def evaluate_loaded(
-    ckpt: LoadedCheckpoint, data: ImageSet, setting: str = "train", seed: int = 0
+    ckpt: LoadedCheckpoint,
+    data: ImageSet,
+    setting: str = "train",
+    seed: int = 0,
+    instructions: Sequence[str] | None = None,
 ) -> EvalResult:
-    instructions = instructions_for(ckpt, data, setting, seed)
+    """Rank-1 of `ckpt` on `data`; `instructions` (one per image) default to `instructions_for(setting)`."""
+    if instructions is None:
+        instructions = instructions_for(ckpt, data, setting, seed)
     dist = predict_distances(ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, data.images, instructions)
     return score(dist, data, setting)
 
@@ -230,7 +237,8 @@ def evaluate_checkpoint(
     index = load_index(data_dir)
     eps = index.default_epsilon_px() if epsilon_px is None else epsilon_px
     data = load_images(index.split(split), ckpt.config.image_size, eps, desc=split)
-    result = evaluate_loaded(ckpt, data, setting, seed)
+    instructions = instructions_for(ckpt, data, setting, seed)
+    result = evaluate_loaded(ckpt, data, setting, seed, instructions)
     result.by_targets_in_view = _by_targets_in_view(result, data)
     if ckpt.model.presence is not None and data.targets:
         empty_rows = index.split("empty") if split == "test" else []
@@ -239,6 +247,6 @@ def evaluate_checkpoint(
             if empty_rows
             else None
         )
-        result.presence = _presence(ckpt, data, empty, setting, seed)
+        result.presence = _presence(ckpt, data, instructions, empty, setting, seed)
     log.info("%s on %s/%s (%d images): rank-1 %.4f", model_dir, data_dir, split, result.n, result.rank1)
     return result

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from controller.planning.latent.data import TargetRef
-from controller.planning.latent.phrasing import COLOURS, TargetName, fill_phrase, noun_phrase, synonyms
+from controller.planning.latent.phrasing import COLOURS, TargetName, phrasing_table, synonyms
 from controller.planning.latent.tokenizer import InstructionTokenizer
 from core.targets import TARGET_KINDS
 
@@ -50,6 +50,12 @@ def target_name_for(target: TargetRef, visible: Sequence[TargetRef], with_colour
     return TargetName(target.kind, colour)
 
 
+def named_target_name(refs: Sequence[TargetRef], with_colour: bool) -> TargetName:
+    """How to ask for an image's named target (`refs[0]`) among the targets it shows."""
+    visible = [t for t in refs if t.in_view] or [refs[0]]
+    return target_name_for(refs[0], visible, with_colour)
+
+
 def absent_names(targets: Sequence[TargetRef]) -> list[TargetName]:
     """Names that match no target of the scene: a kind none has, or a kind with a colour none of it has."""
     kinds = {t.kind for t in targets}
@@ -71,14 +77,8 @@ class DescriptionSampler:
         self.templates = list(templates)
         self.corpus = corpus
         self.absent_fraction = absent_fraction
-        keys, texts = [], []
-        for kind in TARGET_KINDS:
-            for s, synonym in enumerate(synonyms(kind, corpus)):
-                for colour in (None, *COLOURS):
-                    phrase = noun_phrase(TargetName(kind, colour), synonym)
-                    for t, template in enumerate(self.templates):
-                        keys.append((kind, colour, s, t))
-                        texts.append(fill_phrase(template, phrase))
+        table = phrasing_table(self.templates, corpus)
+        keys, texts = [key for key, _ in table], [text for _, text in table]
         self.row_of = {key: i for i, key in enumerate(keys)}
         self.ids = tokenizer.batch(texts)  # (K, L)
 
@@ -91,9 +91,7 @@ class DescriptionSampler:
         """(B, L) ids asking for each image's named target (goal images: "the named target is centred")."""
         rows = []
         for refs in targets:
-            visible = [t for t in refs if t.in_view] or [refs[0]]
-            name = target_name_for(refs[0], visible, rng.random() < ATTRIBUTE_FRACTION)
-            rows.append(self._ids_row(name, rng))
+            rows.append(self._ids_row(named_target_name(refs, rng.random() < ATTRIBUTE_FRACTION), rng))
         return self._trimmed(rows)
 
     def sample(self, targets: Sequence[tuple[TargetRef, ...]], rng: np.random.Generator) -> SampledPairs:

@@ -84,17 +84,28 @@ def describe(name: TargetName, templates: Sequence[str], corpus: str, rng: np.ra
     return fill_phrase(template, noun_phrase(name, options[int(rng.integers(len(options)))]))
 
 
-def all_phrasings(templates: Sequence[str], corpus: str) -> list[str]:
-    """Every instruction of `templates` × kinds × synonyms × (no colour, each colour).
+PhraseKey = tuple[str, str | None, int, int]
+"""(kind, colour or None, synonym index, template index) of one instruction."""
 
-    The tokenizer's corpus for a model trained on described targets."""
+
+def phrasing_table(templates: Sequence[str], corpus: str) -> list[tuple[PhraseKey, str]]:
+    """Every instruction of `templates` × kinds × synonyms × (no colour, each colour), with its key.
+
+    The described model's tokenizer corpus, and the table its training sampler draws from."""
     out = []
     for kind in TARGET_KINDS:
-        for synonym in synonyms(kind, corpus):
+        for s, synonym in enumerate(synonyms(kind, corpus)):
             for attribute in (None, *COLOURS):
                 phrase = noun_phrase(TargetName(kind, attribute), synonym)
-                out.extend(fill_phrase(t, phrase) for t in templates)
+                out.extend(
+                    ((kind, attribute, s, t), fill_phrase(tpl, phrase)) for t, tpl in enumerate(templates)
+                )
     return out
+
+
+def all_phrasings(templates: Sequence[str], corpus: str) -> list[str]:
+    """The texts of `phrasing_table`: the tokenizer's corpus for a model trained on described targets."""
+    return [text for _, text in phrasing_table(templates, corpus)]
 
 
 _KIND_LINE = re.compile(r"^\s*([A-Za-z_ ]+?)\s*:\s*(.+?)\s*$")

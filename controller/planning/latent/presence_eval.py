@@ -23,7 +23,7 @@ import torch
 
 from controller.planning.latent.checkpoint import LoadedCheckpoint
 from controller.planning.latent.data import ImageSet, to_float
-from controller.planning.latent.pairs import absent_names, target_name_for
+from controller.planning.latent.pairs import absent_names, named_target_name
 from controller.planning.latent.phrasing import describe
 
 
@@ -71,7 +71,7 @@ def empty_instructions(data: ImageSet, templates: Sequence[str], corpus: str, se
     """One instruction per image asking for its scene's named target (which is out of view)."""
     rng = np.random.default_rng(seed)
     return [
-        describe(target_name_for(refs[0], [refs[0]], False), templates, corpus, rng) for refs in data.targets
+        describe(named_target_name(refs, False), templates, corpus, rng) for refs in data.targets
     ]
 
 

@@ -23,7 +23,7 @@ from controller.planning.latent.data import ImageSet, to_float
 from controller.planning.latent.instructions import builtin_templates
 from controller.planning.latent.losses import LossTerms, distance, total_loss
 from controller.planning.latent.model import LatentDynamicsModel
-from controller.planning.latent.pairs import DescriptionSampler, target_name_for
+from controller.planning.latent.pairs import DescriptionSampler, named_target_name
 from controller.planning.latent.phrasing import fill_phrase, noun_phrase, synonyms
 from controller.planning.latent.tokenizer import InstructionTokenizer
 
@@ -56,8 +56,7 @@ def goal_ids(tokenizer: InstructionTokenizer, goals: ImageSet, corpus: str) -> t
     template = builtin_templates("fixed")[0]
     texts = []
     for refs in goals.targets:
-        visible = [t for t in refs if t.in_view] or [refs[0]]
-        name = target_name_for(refs[0], visible, with_colour=False)
+        name = named_target_name(refs, with_colour=False)
         texts.append(fill_phrase(template, noun_phrase(name, synonyms(name.kind, corpus)[0])))
     return tokenizer.batch(texts)
 
