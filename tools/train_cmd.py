@@ -73,6 +73,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--no-augment", action="store_true", help="turn augmentation off")
     p.add_argument("--epsilon-px", type=float, default=None, help="ε in dataset pixels (default 10 at 224)")
+    p.add_argument("--brightness", type=float, default=None, help="brightness jitter")
+    p.add_argument("--contrast", type=float, default=None, help="contrast jitter")
+    p.add_argument(
+        "--named-fraction",
+        type=float,
+        default=None,
+        help="described targets: share of samples asking for the image's named target (default 0.5)",
+    )
+    p.add_argument(
+        "--channels-last", choices=("on", "off"), default=None, help="channels-last memory order (speed)"
+    )
+    p.add_argument(
+        "--device",
+        default="cpu",
+        help="where the model trains: cpu (default), cuda, cuda:N, or auto (a GPU if torch sees one)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -110,6 +126,14 @@ def main(argv: list[str]) -> int:
         aug_over["hue"] = args.hue
     if args.saturation is not None:
         aug_over["saturation"] = args.saturation
+    if args.brightness is not None:
+        aug_over["brightness"] = args.brightness
+    if args.contrast is not None:
+        aug_over["contrast"] = args.contrast
+    if args.named_fraction is not None:
+        train_over["named_fraction"] = args.named_fraction
+    if args.channels_last is not None:
+        train_over["channels_last"] = args.channels_last == "on"
     if args.balance_kinds is not None:
         train_over["balance_kinds"] = args.balance_kinds == "on"
     if aug_over:
@@ -129,9 +153,15 @@ def main(argv: list[str]) -> int:
         model_overrides=model_over,
         train_overrides=train_over,
     )
-    from controller.planning.latent.train import train  # torch is imported only once arguments are valid
+    from controller.planning.latent.train import resolve_device, train  # torch only once arguments are valid
 
-    result = train(list(args.data), args.out, run.model, run.train, progress=not args.quiet)
+    try:
+        resolve_device(args.device)
+    except ValueError as exc:
+        raise SystemExit(f"dronectl train: {exc}") from None
+    result = train(
+        list(args.data), args.out, run.model, run.train, progress=not args.quiet, device=args.device
+    )
     print(
         json.dumps(
             {

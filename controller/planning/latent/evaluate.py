@@ -88,11 +88,12 @@ def goal_embedding(
     model.eval()
     if model.conditioned and goal_ids is None:
         raise ValueError("a FiLM-conditioned model needs each goal image's instruction (goal_ids)")
+    dev = _device_of(model)
     parts = []
     for i in range(0, len(goal_images_u8), batch):
-        text = model.encode_text(goal_ids[i : i + batch]) if goal_ids is not None else None
-        parts.append(model.encode_images(to_float(goal_images_u8[i : i + batch]), text))
-    return torch.cat(parts).mean(dim=0)
+        text = model.encode_text(goal_ids[i : i + batch].to(dev)) if goal_ids is not None else None
+        parts.append(model.encode_images(to_float(goal_images_u8[i : i + batch].to(dev)), text))
+    return torch.cat(parts).mean(dim=0).cpu()
 
 
 @torch.inference_mode()
@@ -106,11 +107,18 @@ def predict_distances(
 ) -> torch.Tensor:
     """(N, 9) distances D(ẑ'_a, z*) for N images, each with its own instruction."""
     model.eval()
+    dev = _device_of(model)
+    goal = goal.to(dev)
     out = []
     for i in range(0, len(images_u8), batch):
-        ids = tokenizer.batch(instructions[i : i + batch])
-        out.append(model(to_float(images_u8[i : i + batch]), ids, goal))
+        ids = tokenizer.batch(instructions[i : i + batch]).to(dev)
+        out.append(model(to_float(images_u8[i : i + batch].to(dev)), ids, goal).cpu())
     return torch.cat(out)
+
+
+def _device_of(model: torch.nn.Module) -> torch.device:
+    """Where the model's weights live (training may run on a GPU; results come back to the CPU)."""
+    return next(model.parameters()).device
 
 
 def score(distances: torch.Tensor, data: ImageSet, setting: str) -> EvalResult:

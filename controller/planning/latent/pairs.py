@@ -72,11 +72,17 @@ class DescriptionSampler:
     """Per-sample target choice and instruction, from pre-tokenised (template, synonym, colour) phrases."""
 
     def __init__(
-        self, tokenizer: InstructionTokenizer, templates: Sequence[str], corpus: str, absent_fraction: float
+        self,
+        tokenizer: InstructionTokenizer,
+        templates: Sequence[str],
+        corpus: str,
+        absent_fraction: float,
+        named_fraction: float = NAMED_FRACTION,
     ) -> None:
         self.templates = list(templates)
         self.corpus = corpus
         self.absent_fraction = absent_fraction
+        self.named_fraction = named_fraction
         table = phrasing_table(self.templates, corpus)
         keys, texts = [key for key, _ in table], [text for _, text in table]
         self.row_of = {key: i for i, key in enumerate(keys)}
@@ -106,7 +112,7 @@ class DescriptionSampler:
                 continue
             if not visible:
                 raise ValueError("a training image with no target in view and nothing absent to ask for")
-            if refs[0] in visible and rng.random() < NAMED_FRACTION:
+            if refs[0] in visible and rng.random() < self.named_fraction:
                 target = refs[0]
             else:
                 target = visible[int(rng.integers(len(visible)))]

@@ -9,6 +9,7 @@ with the stored-goal rule used at inference; the best epoch is saved.
 
 from __future__ import annotations
 
+import copy
 import json
 import logging
 import math
@@ -49,7 +50,7 @@ from controller.planning.latent.phrasing import all_phrasings
 from controller.planning.latent.plots import plot_curves
 from controller.planning.latent.tokenizer import InstructionTokenizer
 from controller.planning.latent.train_described import goal_ids as _goal_ids
-from controller.planning.latent.train_described import ranking_terms
+from controller.planning.latent.train_described import model_input, ranking_terms
 from controller.planning.latent.train_described import step_described as _step_described
 
 log = logging.getLogger(__name__)
@@ -107,8 +108,16 @@ def train(
     model_cfg: ModelConfig,
     cfg: TrainConfig,
     progress: bool = True,
+    device: str = "cpu",
 ) -> TrainResult:
-    """Train on `data_dir` (a collected dataset folder, or several); write the best checkpoint + metrics."""
+    """Train on `data_dir` (a collected dataset folder, or several); write the best checkpoint + metrics.
+
+    `device` is where the model trains ("cpu", "cuda", "cuda:1", or "auto": a GPU if torch sees
+    one). Data, augmentation and their random draws stay on the CPU either way, so a GPU run
+    draws the same samples; its arithmetic differs in the last bits. The checkpoint is written
+    from a CPU copy, the same format as ever.
+    """
+    dev = resolve_device(device)
     torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
@@ -147,11 +156,13 @@ def train(
         text_corpus = tokenizer_corpus()
     tokenizer = InstructionTokenizer.train(text_corpus, model_cfg.vocab_size, model_cfg.max_tokens)
     model_cfg = replace(model_cfg, vocab_size=tokenizer.vocab_size)
-    model = LatentDynamicsModel(model_cfg)
+    model = LatentDynamicsModel(model_cfg).to(
+        dev, memory_format=torch.channels_last if cfg.channels_last else torch.preserve_format
+    )
     rng = np.random.default_rng(cfg.seed)
     sampler: _InstructionSampler | DescriptionSampler
     if described:
-        sampler = DescriptionSampler(tokenizer, templates, corpus, cfg.absent_fraction)
+        sampler = DescriptionSampler(tokenizer, templates, corpus, cfg.absent_fraction, cfg.named_fraction)
         val_instructions = pair_described(val_set.targets, templates, corpus, cfg.seed)
         goal_ids = _goal_ids(tokenizer, goals, corpus)
     else:
@@ -220,7 +231,8 @@ def train(
                 "val_x": val.x_accuracy,
                 "val_z": val.z_accuracy,
             }
-            save_checkpoint(out_dir, model, tokenizer, goal, meta)
+            on_cpu = model if dev.type == "cpu" else copy.deepcopy(model).cpu()
+            save_checkpoint(out_dir, on_cpu, tokenizer, goal, meta)
         bar.set_postfix(
             loss=f"{row['total']:.3f}", train=f"{row['train_accuracy']:.3f}", val=f"{val.rank1:.3f}"
         )
@@ -233,6 +245,7 @@ def train(
         "seconds": seconds,
         "cpu_seconds": cpu_seconds,  # all threads; on an otherwise idle machine wall ≈ cpu / threads
         "images_per_s": result.images_per_s,
+        "device": str(dev),
         "model": model_cfg.to_dict(),
         **meta,
         "history": history,
@@ -241,6 +254,21 @@ def train(
     plot_curves(history, out_dir / CURVES_FILE)
     log.info("trained in %.0f s; best val rank-1 %.4f at epoch %d", seconds, best_acc, best_epoch)
     return result
+
+
+def resolve_device(name: str) -> torch.device:
+    """`--device`: cpu, cuda[:N] or auto (a GPU if torch sees one, else the CPU); ValueError if absent."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    try:
+        dev = torch.device(name)
+    except RuntimeError as exc:
+        raise ValueError(f"unknown device {name!r}; use cpu, cuda, cuda:N or auto") from exc
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"device {name!r} asked for, but torch sees no CUDA GPU here ({torch.__version__})")
+    if dev.type not in ("cpu", "cuda"):
+        raise ValueError(f"device {name!r}: training runs on cpu or cuda")
+    return dev
 
 
 def _epoch_order(kinds: list[str], balance: bool, gen: torch.Generator) -> torch.Tensor:
@@ -280,9 +308,12 @@ def _step(
     goal_cfg = replace(cfg.augment, translate=0.0, hflip=False)
     goal_x = augment(to_float(goals.images[g_idx]), goals.offsets[g_idx], size_px, eps, goal_cfg, gen).images
     labels = labels_of(batch.offsets_px, eps) if label_exact(cfg.augment) else data.labels[idx]
-    img = model.encode_images(torch.cat([batch.images, goal_x]))  # (B + G, d), one batch-norm batch
+    x = model_input(model, torch.cat([batch.images, goal_x]), cfg.channels_last)
+    labels = labels.to(x.device)
+    img = model.encode_images(x)  # (B + G, d), one batch-norm batch
     goal_mean = img[b:].mean(dim=0, keepdim=True)  # (1, d): this step's goal image mean
-    text = model.encode_text(sampler.sample([data.kinds[i] for i in idx.tolist()], gen))  # (B, d)
+    ids = sampler.sample([data.kinds[i] for i in idx.tolist()], gen)
+    text = model.encode_text(ids.to(x.device))  # (B, d)
     z_s = model.fuse_state(img[:b], text)  # (B, d)
     z_goal = model.fuse_state(goal_mean.expand(b, -1), text)  # (B, d)
     terms, d_all = ranking_terms(model, cfg, z_s, z_goal, labels)

@@ -37,7 +37,7 @@ def ranking_terms(
 ) -> tuple[LossTerms, torch.Tensor]:
     """The paper's four losses for states z_s (B, d) against goals z_goal (B, d), and the (B, 9) distances."""
     d_all, deltas = model.score(z_s, z_goal)  # (B, 9), (B, 9, d)
-    rows = torch.arange(len(labels))
+    rows = torch.arange(len(labels), device=labels.device)
     terms = total_loss(
         d_now=distance(z_s, z_goal, model.config.distance),
         d_all=d_all,
@@ -49,6 +49,12 @@ def ranking_terms(
         temperature=cfg.temperature,
     )
     return terms, d_all
+
+
+def model_input(model: LatentDynamicsModel, images: torch.Tensor, channels_last: bool) -> torch.Tensor:
+    """A CPU-augmented batch on the model's device, in the memory order training uses."""
+    fmt = torch.channels_last if channels_last else torch.contiguous_format
+    return images.to(next(model.parameters()).device, memory_format=fmt)
 
 
 def goal_ids(tokenizer: InstructionTokenizer, goals: ImageSet, corpus: str) -> torch.Tensor:
@@ -92,15 +98,16 @@ def step_described(
             F.pad(goal_text_ids, (0, width - goal_text_ids.shape[1])),
         ]
     )
-    text_all = model.encode_text(ids)  # (B + G, d)
-    img = model.encode_images(torch.cat([batch.images, goal_x]), text_all)  # (B + G, d), one BN batch
+    x = model_input(model, torch.cat([batch.images, goal_x]), cfg.channels_last)
+    text_all = model.encode_text(ids.to(x.device))  # (B + G, d)
+    img = model.encode_images(x, text_all)  # (B + G, d), one BN batch
     text = text_all[:b]
     goal_mean = img[b:].mean(dim=0, keepdim=True)  # (1, d)
     z_s = model.fuse_state(img[:b], text)  # (B, d)
     z_goal = model.fuse_state(goal_mean.expand(b, -1), text)  # (B, d)
-    present = pairs.present
+    present = pairs.present.to(x.device)
     keep = present.nonzero().squeeze(1)
-    labels = labels[keep]
+    labels = labels.to(x.device)[keep]
     terms, d_all = ranking_terms(model, cfg, z_s[keep], z_goal[keep], labels)
     if model.presence is not None and cfg.presence_weight > 0:
         presence = F.binary_cross_entropy_with_logits(model.presence_logits(z_s), present.float())
