@@ -295,11 +295,21 @@ def _serve(
 
 def frame_truth(world: World, render: Any, pose: list[float], origin_enu_m: np.ndarray) -> dict[str, Any]:
     """JSON-able truth of one frame: the target in pixels and the drone's pose (ENU and NED from home)."""
-    truth = world.target_truth(render)
+    everyone = world.targets_truth(render)  # in the order of scene.targets: the named one first
+    truth = everyone[world.scene.named_index]
     position = np.asarray(pose[0:3])
     yaw_enu = world.state().yaw_enu_rad
     return {
         "time_s": round(pose[10], 4),
+        "targets": [  # every target of the scene, the named one first (wrong-target judging)
+            {
+                "kind": target.kind,
+                "attribute": target.attribute,
+                "offset_px": _floats(t.offset_px),
+                "in_view": bool(t.in_view),
+            }
+            for target, t in zip(world.scene.targets, everyone, strict=True)
+        ],
         "target": {
             "kind": world.scene.target_kind,
             "centre_px": _floats(truth.centre_px),

@@ -50,9 +50,10 @@ class FlightKit:
     """ε when the kit fixes it (tests); None: the mission's, else `default_epsilon_px(image_width_px)`."""
     target: TargetQuery | None = None
     """The loop's target (`CentringConfig.target`); None: the instruction's own parse (real vehicles)."""
-    targets_truth: Callable[[], list[tuple[float, float] | None]] | None = None
+    targets_truth: Callable[[], list[tuple[float, float] | None] | None] | None = None
     """Judging only: every target's true offset in pixels now (None: out of view), the named one first;
-    None where the kit cannot tell (only the in-process sim can: wrong-target judging)."""
+    None where the kit cannot tell (a real vehicle). The simulators (in-process, sim-vehicle, the PX4
+    bridge) can: wrong-target judging."""
 
 
 def named_target(mission: Mission, targets: list[tuple[str, str]]) -> tuple[str, TargetQuery | None]:

@@ -62,6 +62,17 @@ class SimTruth:
             return None
         return (float(target["offset_px"][0]), float(target["offset_px"][1])) if target["in_view"] else None
 
+    def targets_offsets(self) -> list[tuple[float, float] | None] | None:
+        """Every target's true offset (None: out of view), the named one first; None if unreachable or
+        the simulator publishes only the named target (an older sim-vehicle)."""
+        try:
+            targets = _get_json(self.url)["truth"]["targets"]
+            return [(float(t["offset_px"][0]), float(t["offset_px"][1])) if t["in_view"] else None
+                    for t in targets]  # fmt: skip
+        except (OSError, ValueError, KeyError, TypeError, IndexError) as exc:
+            log.warning("no truth of every target from %s: %s", self.url, exc)
+            return None
+
     def extremes(self) -> dict[str, Any] | None:
         """The largest speeds and excursions from home seen in any frame so far (None if unreachable)."""
         try:
@@ -132,6 +143,7 @@ def simulated_mavlink_kit(
         target=query,
         truth_probe=truth.offset_px,
         truth_extremes=truth.extremes,
+        targets_truth=truth.targets_offsets,
         takeoff_altitude_m=climb_m,
         info={
             "scene_seed": mission.scene.seed,
