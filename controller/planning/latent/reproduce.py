@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from tqdm import tqdm
 
@@ -22,6 +23,7 @@ from core.parallel import gather, task_executor
 
 log = logging.getLogger(__name__)
 EVAL_FILE = "eval.json"
+J = TypeVar("J")
 
 
 @dataclass(frozen=True)
@@ -75,6 +77,31 @@ def run_job(job: Job) -> dict[str, Any]:
     return summary
 
 
+def run_jobs(
+    jobs: Sequence[J],
+    fn: Callable[[J], dict[str, Any]],
+    label: Callable[[J], str],
+    workers: int,
+    ray: str | None,
+    desc: str,
+) -> tuple[list[dict[str, Any]], list[str]]:
+    """Run `fn` on every job, in this process (`workers` 1, no Ray) or on a pool; returns the results of
+    those that finished and a line naming each one that failed (its label and the error)."""
+    with task_executor(workers, ray) as pool, tqdm(total=len(jobs), desc=desc) as bar:
+        if pool is None:
+            done: list[dict[str, Any] | BaseException] = []
+            for job in jobs:
+                done.append(fn(job))
+                bar.update(1)
+        else:
+            futures = [pool.submit(fn, job) for job in jobs]
+            done = gather(futures, lambda i: label(jobs[i]), bar)
+    results = [r for r in done if not isinstance(r, BaseException)]
+    failed = [f"{label(job)}: {type(r).__name__}: {r}"
+              for job, r in zip(jobs, done, strict=True) if isinstance(r, BaseException)]  # fmt: skip
+    return results, failed
+
+
 class ReproduceTaskError(RuntimeError):
     """Some training runs failed on their workers; the report holds the others."""
 
@@ -105,18 +132,9 @@ def reproduce(
         for name in EXPERIMENT_SETS[experiments]
         for seed in range(seeds)
     ]
-    with task_executor(workers, ray) as pool, tqdm(total=len(jobs), desc="runs") as bar:
-        if pool is None:
-            done: list[dict[str, Any] | BaseException] = []
-            for job in jobs:
-                done.append(run_job(job))
-                bar.update(1)
-        else:
-            futures = [pool.submit(run_job, job) for job in jobs]
-            done = gather(futures, lambda i: f"{jobs[i].experiment.name} seed {jobs[i].seed}", bar)
-    results = [r for r in done if not isinstance(r, BaseException)]
-    failed = [f"{job.experiment.name} seed {job.seed}: {type(r).__name__}: {r}"
-              for job, r in zip(jobs, done, strict=True) if isinstance(r, BaseException)]  # fmt: skip
+    results, failed = run_jobs(
+        jobs, run_job, lambda job: f"{job.experiment.name} seed {job.seed}", workers, ray, "runs"
+    )
     for summary in results:
         log.info(
             "%s seed %d: held-out rank-1 %.4f",

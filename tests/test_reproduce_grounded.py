@@ -1,0 +1,88 @@
+"""`dronectl reproduce --experiments grounded`: seeds, the held-out look's matched gap, resuming."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from latent_synthetic import write_synthetic_dataset
+
+from controller.planning.latent.reproduce_grounded import (
+    LOOK,
+    look_gap,
+    named_test_sets,
+    reproduce_grounded,
+    summarise,
+)
+
+
+def _cell(n: int, rank1: float) -> dict[str, float]:
+    return {"n": n, "rank1": rank1}
+
+
+def test_look_gap_compares_like_with_like_and_leaves_twins_out() -> None:
+    summary = {
+        "tests": {
+            "paper": {"by_targets_in_view": {"1": _cell(20, 1.0)}, "twins": False},
+            "multi": {"by_targets_in_view": {"1": _cell(20, 0.95), "2": _cell(10, 0.9)}, "twins": False},
+            "twins": {"by_targets_in_view": {"2": _cell(50, 0.5)}, "twins": True},  # harder: not a reference
+            LOOK: {"by_targets_in_view": {"1": _cell(10, 0.9), "2": _cell(30, 0.8), "4": _cell(5, 0.0)}},
+        }
+    }
+    gap = look_gap(summary)
+    assert gap is not None
+    # Weighted by the look set's own mix (10 one-target, 30 two-target images); its 4-target images
+    # have no in-distribution counterpart and are left out of both sides.
+    assert gap["in_distribution"] == pytest.approx((10 * (20 * 1.0 + 20 * 0.95) / 40 + 30 * 0.9) / 40)
+    assert gap["heldout"] == pytest.approx((10 * 0.9 + 30 * 0.8) / 40)
+    assert look_gap({"tests": {"paper": summary["tests"]["paper"]}}) is None
+
+
+def test_summary_spreads_over_seeds() -> None:
+    def seed(s: int, r: float) -> dict:
+        return {
+            "seed": s,
+            "train_seconds": 100.0 + s,
+            "tests": {"multi": {"rank1": r, "n": 4, "auroc": 0.9, "by_targets_in_view": {}, "twins": False}},
+        }
+
+    table = summarise([seed(0, 0.9), seed(1, 0.8), seed(2, 1.0)])
+    cell = table["tests"]["multi"]["rank1"]
+    assert cell["mean"] == pytest.approx(0.9) and cell["sd"] == pytest.approx(0.1)
+    assert (cell["min"], cell["max"]) == (0.8, 1.0)
+    assert "look_gap" not in table  # no held-out look given
+
+
+def test_test_sets_need_distinct_names(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="distinct"):
+        named_test_sets([tmp_path / "a" / "multi", tmp_path / "b" / "multi"], None)
+    with pytest.raises(ValueError, match="no test folder"):
+        named_test_sets([], None)
+
+
+TINY = {"image_size": 32, "base_width": 4}  # the grounded preset's model, shrunk: minutes to seconds
+
+
+@pytest.mark.timeout(600)
+def test_grounded_reproduction_trains_each_seed_once_and_reports(tmp_path: Path) -> None:
+    one = write_synthetic_dataset(tmp_path / "one", n_goal=16, n_train=64, n_test=16, seed=1)
+    two = write_synthetic_dataset(tmp_path / "two", n_goal=16, n_train=64, n_test=24, seed=2, targets=2)
+    look = write_synthetic_dataset(tmp_path / "look", n_goal=4, n_train=8, n_test=16, seed=3, targets=2)
+    out = tmp_path / "report"
+    report = reproduce_grounded([one, two], [one, two], look, out, seeds=2, epochs=1, model_overrides=TINY)
+    text = report.read_text()
+    assert "| one (" in text and "| two (" in text and f"| {LOOK} (" in text and "gap:" in text
+    data = json.loads((out / "grounded.json").read_text())
+    assert [s["seed"] for s in data["seeds"]] == [0, 1]
+    assert set(data["seeds"][0]["tests"]) == {"one", "two", LOOK}
+    assert data["seeds"][0]["epochs"] == 1
+    # A second call reuses both seeds: it needs no training data, and changes nothing recorded.
+    before = (out / "runs" / "grounded_s0" / "eval.json").read_text()
+    (out / "runs" / "grounded_s1" / "eval.json").unlink()  # seed 1: trained, not yet evaluated
+    again = reproduce_grounded(
+        [tmp_path / "gone"], [one, two], look, out, seeds=2, epochs=1, model_overrides=TINY
+    )
+    assert again == report
+    assert (out / "runs" / "grounded_s0" / "eval.json").read_text() == before
+    assert json.loads((out / "grounded.json").read_text())["seeds"][1]["tests"]["two"]["n"] == 24
