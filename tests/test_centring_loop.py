@@ -8,13 +8,14 @@ import pytest
 from fake_vehicle import FakeVehicle
 from mission_fakes import PX_PER_M, FakeCamera, FakeDetector, FakePlanner
 
+from controller.planning.actions import ALL_ACTIONS
 from controller.planning.loop import (
     CentringConfig,
     CentringLoop,
     MoveSchedule,
     Outcome,
 )
-from controller.planning.planners import ClassicPlanner
+from controller.planning.planners import ClassicPlanner, Observation, Plan
 from core.centring import default_stop_margin_px
 from flight.types import VelocityBody
 from perception.types import Frame
@@ -124,8 +125,10 @@ def test_refinement_is_bounded_and_no_move_far_from_the_boundary_is_a_stall() ->
     result = make_loop(vehicle, FakePlanner([NONE]), max_refinements=1, min_move_m=0.01, move_m=0.3).run()
     assert [s.event for s in result.steps] == ["refinement", "stall", "stall", "stall"]
     assert result.outcome is Outcome.PLANNER_STALLED and result.refinement_moves == 1
-    far = make_loop(FakeVehicle.at_pose(east_m=-0.5), FakePlanner([NONE]), max_stalls=3).run()
-    assert far.outcome is Outcome.PLANNER_STALLED and far.refinement_moves == 0 and far.moves == 0
+    far = make_loop(FakeVehicle.at_pose(east_m=-0.5), FakePlanner([NONE]), max_stalls=3, max_second_choices=0)
+    far_result = far.run()
+    assert far_result.outcome is Outcome.PLANNER_STALLED and far_result.refinement_moves == 0
+    assert far_result.moves == 0
 
 
 def test_respects_the_step_budget() -> None:
@@ -208,10 +211,51 @@ def test_recovery_brings_the_target_back_and_the_loop_goes_on() -> None:
 
 def test_planner_choosing_no_move_stalls_out() -> None:
     vehicle = FakeVehicle.at_pose(east_m=-0.5)
-    result = make_loop(vehicle, FakePlanner([NONE]), max_stalls=3).run()
+    result = make_loop(vehicle, FakePlanner([NONE]), max_stalls=3, max_second_choices=0).run()
     assert result.outcome is Outcome.PLANNER_STALLED
     assert len(result.steps) == 3 and result.moves == 0
     assert vehicle.east_m == pytest.approx(-0.5)
+
+
+class _RanksSecond:
+    """Always "no move", ranking `second` next (a planner that takes another target for the named one)."""
+
+    name = "ranks-second"
+
+    def __init__(self, second: int) -> None:
+        self.second = second
+
+    def plan(self, observation: Observation) -> Plan:
+        distances = [0.9] * 9
+        distances[NONE], distances[self.second] = 0.1, 0.2
+        return Plan(ALL_ACTIONS[NONE], tuple(distances))
+
+
+def test_no_move_far_from_centre_flies_the_planners_second_choice() -> None:
+    vehicle = FakeVehicle.at_pose(east_m=-0.5)  # the target lies right of centre: RIGHT is the way
+    result = make_loop(vehicle, _RanksSecond(RIGHT)).run()
+    assert result.outcome is Outcome.CENTRED
+    assert result.second_choice_moves >= 1
+    assert result.moves == result.second_choice_moves + result.refinement_moves  # near ε: a refinement
+    moved = [s for s in result.steps if s.event == "second_choice"]
+    assert all(s.action.is_none for s in moved)  # the record keeps what the planner chose
+    assert all(s.move_m[0] > 0.1 and s.move_m[1] == 0 for s in moved)  # its second choice: right only
+
+
+def test_second_choices_are_bounded_then_a_no_move_is_a_stall() -> None:
+    vehicle = FakeVehicle.at_pose(east_m=-0.5)
+    result = make_loop(vehicle, _RanksSecond(LEFT), max_second_choices=2, max_stalls=2).run()  # the wrong way
+    assert [s.event for s in result.steps] == ["second_choice", "second_choice", "stall", "stall"]
+    assert result.outcome is Outcome.PLANNER_STALLED and result.second_choice_moves == 2
+    no_ranking = make_loop(FakeVehicle.at_pose(east_m=-0.5), _NoRanking(), max_stalls=2).run()
+    assert no_ranking.outcome is Outcome.PLANNER_STALLED and no_ranking.moves == 0
+
+
+class _NoRanking:
+    name = "no-ranking"
+
+    def plan(self, observation: Observation) -> Plan:
+        return Plan(ALL_ACTIONS[NONE])
 
 
 def test_every_step_is_recorded_with_pose_distances_and_timing() -> None:

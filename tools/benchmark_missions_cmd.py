@@ -98,6 +98,13 @@ def main(argv: list[str]) -> int:
         "--fixed-moves", action="store_true", help="the paper's fixed move lengths instead of scaled ones"
     )
     parser.add_argument(
+        "--second-choices",
+        type=int,
+        default=None,
+        help="moves per mission on the planner's best-ranked move after a 'no move' far from centre "
+        "(default: the loop's 4; 0: such a 'no move' is a stall, the planner alone)",
+    )
+    parser.add_argument(
         "--targets", type=int, default=1, help="targets in every scene, the named one included (1..4)"
     )
     parser.add_argument(
@@ -171,7 +178,7 @@ def main(argv: list[str]) -> int:
             px4_dir=args.px4, px4_speed=_speed("--px4-speed", args.px4_speed), faults=faults_from_args(args),
             sim_speed=_speed("--sim-speed", args.sim_speed),
             rerun=args.rerun, ray=args.ray, targets=args.targets, twins=args.twins,
-            instructions=args.instructions, absent=args.absent,
+            instructions=args.instructions, absent=args.absent, second_choices=args.second_choices,
         )  # fmt: skip
         if config.vehicle == "px4-sitl":  # a missing PX4 folder is named before anything flies
             config = replace(config, px4_dir=str(find_px4_dir(config.px4_dir)))

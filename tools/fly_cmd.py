@@ -75,6 +75,8 @@ def summary_lines(result: MissionResult) -> list[str]:
     verdict = "PASS" if result.passed else "FAIL"
     outcome = result.outcome.replace("_", " ")
     refined = f", {result.refinement_moves} of them boundary refinement" if result.refinement_moves else ""
+    if result.second_choice_moves:
+        refined += f", {result.second_choice_moves} on the planner's second choice"
     lines = [
         f"{verdict}  {result.name}: {outcome} after {result.steps} steps "
         f"({result.moves} moves{refined}; {result.vehicle_s:.1f} s of flight)"

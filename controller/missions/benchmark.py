@@ -155,6 +155,8 @@ def summarise(config: BenchmarkConfig, results: list[MissionResult], wall_s: flo
             "overhead_ms_mean": statistics.fmean(overhead) if overhead else None,
             "refinement_moves": sum(r.refinement_moves for r in rows.values()),
             "missions_with_refinement": sum(r.refinement_moves > 0 for r in rows.values()),
+            "second_choice_moves": sum(r.second_choice_moves for r in rows.values()),
+            "missions_with_second_choice": sum(r.second_choice_moves > 0 for r in rows.values()),
             "wrong_target": sum(r.wrong_target for r in rows.values()),
             "absent": {
                 "missions": len(absent),
@@ -239,7 +241,8 @@ def format_summary(summary: dict[str, Any]) -> str:
     lines = [
         f"{cfg['n']} missions per planner, seed {cfg['seed']}, vehicle {cfg['vehicle']}, "
         f"budget {cfg['max_steps']} steps, {'scaled' if cfg.get('scale_moves', True) else 'fixed'} moves, "
-        f"{summary['wall_s']:.0f} s",
+        + ("" if cfg.get("second_choices") is None else f"at most {cfg['second_choices']} second choices, ")
+        + f"{summary['wall_s']:.0f} s",
     ]
     if cfg.get("targets", 1) > 1 or cfg.get("twins") or cfg.get("absent"):
         corpus = cfg.get("instructions") or "heldout"
@@ -269,18 +272,20 @@ def format_summary(summary: dict[str, Any]) -> str:
     any_absent = any(p.get("absent", {}).get("missions") for p in summary["planners"].values())
     lines.append(
         f"{'planner':<8} {'success':>15} {'mean steps':>10} {'/oracle':>8} {'offset px mean/p95/max':>23} "
-        f"{'refinement moves':>16} {'overhead ms':>11} {'wrong target':>12}"
+        f"{'refinement moves':>16} {'second choices':>14} {'overhead ms':>11} {'wrong target':>12}"
         + (f" {'absent: not found/wandered':>26}" if any_absent else "")
     )
     for name, p in summary["planners"].items():
         refinements = f"{p['refinement_moves']} in {p['missions_with_refinement']}"
+        seconds = f"{p.get('second_choice_moves', 0)} in {p.get('missions_with_second_choice', 0)}"
         offsets = "/".join(
             num(p[k], ".1f") for k in ("final_offset_px_mean", "final_offset_px_p95", "final_offset_px_max")
         )
         lines.append(
             f"{name:<8} {p['successes']:>5}/{p['missions']:<4} {100 * p['success_rate']:>5.1f}% "
             f"{num(p['mean_steps'], '.2f'):>10} {num(p['mean_steps_over_oracle'], '.2f'):>8} {offsets:>23} "
-            f"{refinements:>16} {num(p['overhead_ms_mean'], '.1f'):>11} {p.get('wrong_target', 0):>12}"
+            f"{refinements:>16} {seconds:>14} {num(p['overhead_ms_mean'], '.1f'):>11} "
+            f"{p.get('wrong_target', 0):>12}"
             + (f" {_absent_cell(p['absent']):>26}" if any_absent else "")
         )
     return "\n".join(lines)

@@ -54,6 +54,8 @@ class BenchmarkConfig:
     detector_checkpoint: str | None = None
     """The image detector's run folder; None: its shipped weights."""
     scale_moves: bool = True
+    second_choices: int | None = None
+    """The loop's `max_second_choices` (None: its default; 0: a "no move" far from centre is a stall)."""
     """The loop's move scheme: scaled with the detector's offset (default) or the paper's fixed lengths."""
     targets: int = 1
     """Targets in every scene, the named one included (1..4)."""
@@ -148,7 +150,8 @@ def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozen
             "detector": config.detector,
             "epsilon_px": config.epsilon_px,
             "max_steps": config.max_steps,
-            "loop": {"scale_moves": config.scale_moves},
+            "loop": {"scale_moves": config.scale_moves}
+            | ({} if config.second_choices is None else {"max_second_choices": config.second_choices}),
             "expect": {"outcome": "target_not_found"} if absent
             else {"outcome": "centred", "max_steps": config.max_steps},
             "ports": PortSpec(

@@ -38,6 +38,8 @@ class MissionResult:
     tags: tuple[str, ...] = ()
     refinement_moves: int = 0
     """Boundary refinement moves the loop flew after the planner chose "no move" (see planning.loop)."""
+    second_choice_moves: int = 0
+    """Moves flown on the planner's best-ranked move after it chose "no move" far from centre."""
     info: dict[str, Any] = field(default_factory=dict)
     vehicle_clock_s: dict[str, float] = field(default_factory=dict)
     files: dict[str, str | None] = field(default_factory=dict)

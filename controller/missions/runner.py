@@ -32,7 +32,13 @@ from controller.missions.results import MissionResult, count_steps, judge, wrong
 from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission
 from controller.planning.grounding import TargetQuery
 from controller.planning.loop import CentringLoop
-from controller.planning.loop_records import CentringConfig, Outcome, StepRecord, count_refinements
+from controller.planning.loop_records import (
+    CentringConfig,
+    Outcome,
+    StepRecord,
+    count_refinements,
+    count_second_choices,
+)
 from core.centring import default_epsilon_px
 from flight.moves import take_off_to_start
 from flight.safe_vehicle import SafeVehicle
@@ -185,6 +191,7 @@ def _finish(
         "steps": n_steps,
         "moves": sum(1 for s in steps if s.move is not None),
         "refinement_moves": count_refinements(steps),
+        "second_choice_moves": count_second_choices(steps),
         "stop_threshold_px": steps[-1].stop_threshold_px if steps else None,
         "final_offset_px": {"truth": final_truth, "detector": final_detector},
         "wrong_target": wrong is not None,
@@ -216,6 +223,7 @@ def _finish(
         tags=mission.tags,
         info=kit.info,
         refinement_moves=summary["refinement_moves"],
+        second_choice_moves=summary["second_choice_moves"],
         vehicle_clock_s=summary["vehicle_clock_s"],
         files=final["files"],
         truth_extremes=summary["truth_extremes"],

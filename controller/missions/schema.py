@@ -176,6 +176,7 @@ class LoopOverrides(StrictModel):
     lost_recoveries: int | None = Field(default=None, ge=0, le=5)
     not_found_rereads: int | None = Field(default=None, ge=0, le=50)
     max_refinements: int | None = Field(default=None, ge=0, le=20)
+    max_second_choices: int | None = Field(default=None, ge=0, le=20)
     scale_moves: bool | None = None
     max_move_m: float | None = Field(default=None, gt=0.0, le=3.0)
     move_gain: float | None = Field(default=None, gt=0.0, le=2.0)

@@ -23,8 +23,19 @@ planner's move on the other axis, if any), at most `max_refinements` steps per r
 A "no move" at all is refined only when no axis lies beyond the band. Each such
 step is recorded (event "refinement") and counted in the report and the benchmark,
 so the planner's own contribution stays visible. A "no move" otherwise, or after the
-refinement budget, is a genuine stall: after `max_stalls` in a row the loop stops
-with `planner_stalled` instead of burning the step budget.
+refinement budget, is a stall.
+
+Second choice: "no move" far from centre (beyond the boundary band on some axis) means
+the planner judged the view already at its goal while the detector, which decides when
+to stop, says it is not; with several targets in view that is the planner taking another
+target for the named one. Where the planner scored every action (`Plan.distances`: the
+latent planner does), the loop flies the planner's best-ranked move instead, at most
+`max_second_choices` times per run (event "second_choice", counted in the report and the
+benchmark like refinements, so the planner's own choices stay visible). The direction is
+still the planner's; the loop only declines "stay" when its own ε test says the target
+is not centred. A "no move" after that budget, or from a planner without a ranking, is a
+genuine stall: after `max_stalls` in a row the loop stops with `planner_stalled` instead
+of burning the step budget.
 
 Move lengths: the planner chooses the direction, the move schedule the length,
 per axis (right/left, up/down). Fixed scheme (`scale_moves=False`, the paper's):
@@ -76,7 +87,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from controller.planning.actions import Action, XMove, ZMove
+from controller.planning.actions import ALL_ACTIONS, Action, XMove, ZMove
 from controller.planning.grounding import TargetQuery, describe_seen, parse_instruction, select_target
 from controller.planning.loop_records import (
     CentringConfig,
@@ -87,7 +98,7 @@ from controller.planning.loop_records import (
     StepTiming,
     TruthProbe,
 )
-from controller.planning.planners import Observation, Planner
+from controller.planning.planners import Observation, Plan, Planner
 from core.centring import default_stop_margin_px, is_centred, offset_px
 from flight.moves import MoveResult, fly_offset
 from flight.vehicle import Deadline, Vehicle
@@ -108,6 +119,7 @@ class _RunState:
     decisions: int = 0  # planner decisions plus recovery moves: what `max_steps` bounds
     stalls: int = 0
     refinements: int = 0
+    second_choices: int = 0
     rereads: int = 0
     seen_target: bool = False  # the named target was detected at least once in this run
     recoveries: int = 0
@@ -177,7 +189,13 @@ class CentringLoop:
         state.decisions += 1
         record.action, record.distances = plan.action, plan.distances
         refine = self._refinement(record, state, plan.action)
-        if plan.action.is_none and refine is None:
+        action = plan.action
+        second = self._second_choice(record, state, plan) if action.is_none and refine is None else None
+        if second is not None:
+            action = second
+            state.second_choices += 1
+            record.event = "second_choice"
+        if action.is_none and refine is None:
             state.stalls += 1
             record.event = "stall"
             if state.stalls >= cfg.max_stalls:
@@ -185,8 +203,8 @@ class CentringLoop:
             self.vehicle.sleep(cfg.settle_s)
             return None
         move = [0.0, 0.0]
-        if not plan.action.is_none:
-            move = list(state.schedule.lengths_for(plan.action, self._wanted_m(record, plan.action)))
+        if not action.is_none:
+            move = list(state.schedule.lengths_for(action, self._wanted_m(record, action)))
         if refine is not None:
             state.refinements += 1
             record.event = "refinement"
@@ -214,6 +232,20 @@ class CentringLoop:
             abs(off) * metres_per_px if sign == want else 0.0  # disagreeing: clamped up to the minimum
             for off, sign, want in zip((du, dv), action.direction(), towards, strict=True)
         )
+
+    def _second_choice(self, record: StepRecord, state: _RunState, plan: Plan) -> Action | None:
+        """The planner's best-ranked move, where it chose "no move" with the target beyond the boundary
+        band on some axis, ranked every action, and the run's second-choice budget is not spent."""
+        cfg = self.config
+        if plan.distances is None or record.offset_px is None or record.stop_threshold_px is None:
+            return None
+        if state.second_choices >= cfg.max_second_choices:
+            return None
+        band_px = cfg.epsilon_px + 2.0 * (cfg.epsilon_px - record.stop_threshold_px)
+        if max(abs(o) for o in record.offset_px) <= band_px:
+            return None  # near the boundary: the refinement's business, or a fair "stay"
+        moves = [a for a in ALL_ACTIONS if not a.is_none]
+        return min(moves, key=lambda a: plan.distances[a.index])  # type: ignore[index]
 
     def _refinement(self, record: StepRecord, state: _RunState, action: Action) -> tuple[int, int] | None:
         """(right, up) signs of the boundary refinement for `action`, or None where none applies.

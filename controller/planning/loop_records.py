@@ -63,6 +63,9 @@ class CentringConfig:
     """Stop when the detector's offset is within ε − this on both axes; None: `default_stop_margin_px(W)`."""
     max_refinements: int = 4
     """Boundary refinement moves allowed per run (0: none; see the module docstring)."""
+    max_second_choices: int = 4
+    """Moves per run flown on the planner's best-ranked move after it chose "no move" far from centre
+    (0: never; such a choice is then a stall; see the module docstring of planning.loop)."""
     scale_moves: bool = True
     """Scale each move with the detector's pixel offset (True) or the paper's fixed lengths (False)."""
     max_move_m: float = 1.0
@@ -84,8 +87,8 @@ class CentringConfig:
             raise ValueError(
                 f"stop_margin_px must be in [0, epsilon_px={self.epsilon_px:g}), got {self.stop_margin_px}"
             )
-        if self.max_refinements < 0:
-            raise ValueError(f"max_refinements must be >= 0, got {self.max_refinements}")
+        if self.max_refinements < 0 or self.max_second_choices < 0:
+            raise ValueError("max_refinements and max_second_choices must be >= 0")
         if not 0 < self.move_gain <= 2 or not 0 < self.hfov_deg < 180 or not self.assumed_distance_m > 0:
             raise ValueError("need 0 < move_gain <= 2, 0 < hfov_deg < 180 and assumed_distance_m > 0")
         if not 0 < self.shrink <= 1:
@@ -168,7 +171,8 @@ class StepRecord:
     move_m: tuple[float, float] | None = None  # commanded (right_m, up_m)
     move: MoveResult | None = None
     event: str = ""
-    """"", "centred", "lost", "not_found", "recovery", "refinement", "stall", "max_steps", "timeout"."""
+    """"", "centred", "lost", "not_found", "recovery", "refinement", "second_choice", "stall", "max_steps",
+    "timeout"."""
     stop_threshold_px: float | None = None  # ε − the stopping margin: what `centred` was tested against
     detections: tuple[Detection, ...] = ()  # everything the detector saw, strongest first
     timing: StepTiming = field(default_factory=lambda: StepTiming(0.0, 0.0, 0.0, 0.0, 0.0))
@@ -189,6 +193,16 @@ class CentringResult:
     def refinement_moves(self) -> int:
         """Boundary refinement moves: flown by the loop after the planner chose "no move"."""
         return count_refinements(self.steps)
+
+    @property
+    def second_choice_moves(self) -> int:
+        """Moves flown on the planner's best-ranked move after it chose "no move" far from centre."""
+        return count_second_choices(self.steps)
+
+
+def count_second_choices(steps: list[StepRecord]) -> int:
+    """How many moves `steps` flew on the planner's second choice (after a "no move" far from centre)."""
+    return sum(1 for s in steps if s.event == "second_choice")
 
 
 def count_refinements(steps: list[StepRecord]) -> int:
