@@ -87,8 +87,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from controller.planning.actions import ALL_ACTIONS, Action, XMove, ZMove
+from controller.planning.actions import Action, XMove, ZMove
 from controller.planning.grounding import TargetQuery, describe_seen, parse_instruction, select_target
+from controller.planning.loop_boundary import refinement_signs, second_choice
+from controller.planning.loop_boundary import sign as _sign
 from controller.planning.loop_records import (
     CentringConfig,
     CentringResult,
@@ -234,42 +236,18 @@ class CentringLoop:
         )
 
     def _second_choice(self, record: StepRecord, state: _RunState, plan: Plan) -> Action | None:
-        """The planner's best-ranked move, where it chose "no move" with the target beyond the boundary
-        band on some axis, ranked every action, and the run's second-choice budget is not spent."""
-        cfg = self.config
-        if plan.distances is None or record.offset_px is None or record.stop_threshold_px is None:
+        """`loop_boundary.second_choice`, while the run's second-choice budget lasts."""
+        if state.second_choices >= self.config.max_second_choices or record.stop_threshold_px is None:
             return None
-        if state.second_choices >= cfg.max_second_choices:
-            return None
-        band_px = cfg.epsilon_px + 2.0 * (cfg.epsilon_px - record.stop_threshold_px)
-        if max(abs(o) for o in record.offset_px) <= band_px:
-            return None  # near the boundary: the refinement's business, or a fair "stay"
-        moves = [a for a in ALL_ACTIONS if not a.is_none]
-        return min(moves, key=lambda a: plan.distances[a.index])  # type: ignore[index]
+        return second_choice(
+            self.config.epsilon_px, record.stop_threshold_px, record.offset_px, plan.distances
+        )
 
     def _refinement(self, record: StepRecord, state: _RunState, action: Action) -> tuple[int, int] | None:
-        """(right, up) signs of the boundary refinement for `action`, or None where none applies.
-
-        An axis is refined where the planner chose no move on it while the detector's offset on
-        it lies in the boundary band (stop threshold, ε + 2 × margin]; a "no move" at all is refined
-        only if no axis lies beyond the band (else the planner is wrong, not the boundary: a stall).
-        """
-        cfg = self.config
-        if record.offset_px is None or record.stop_threshold_px is None:
+        """`loop_boundary.refinement_signs`, while the run's refinement budget lasts."""
+        if state.refinements >= self.config.max_refinements or record.stop_threshold_px is None:
             return None
-        if state.refinements >= cfg.max_refinements:
-            return None
-        threshold = record.stop_threshold_px
-        band_px = cfg.epsilon_px + 2.0 * (cfg.epsilon_px - threshold)  # ε + twice the stopping margin
-        if action.is_none and max(abs(o) for o in record.offset_px) > band_px:
-            return None
-        du, dv = record.offset_px
-        towards = (_sign(du), -_sign(dv))  # target right → fly right; target below → fly down
-        signs = tuple(
-            want if chosen == 0 and threshold < abs(off) <= band_px else 0
-            for off, chosen, want in zip((du, dv), action.direction(), towards, strict=True)
-        )
-        return signs if any(signs) else None  # type: ignore[return-value]
+        return refinement_signs(self.config.epsilon_px, record.stop_threshold_px, record.offset_px, action)
 
     def _on_not_found(self, record: StepRecord, state: _RunState) -> Outcome | None:
         """The named target not seen yet in this run: hold and re-read (bounded), never move."""
@@ -408,7 +386,3 @@ class CentringLoop:
             Outcome.PLANNER_STALLED: f"planner chose 'no move' {cfg.max_stalls} times while not centred",
             Outcome.ABORTED: "aborted",
         }[outcome]
-
-
-def _sign(value: float) -> int:
-    return (value > 0) - (value < 0)
