@@ -189,3 +189,31 @@ def test_training_on_a_gpu_follows_the_cpu_run(synthetic: Path, tmp_path: Path) 
     gpu = _one_epoch(synthetic, tmp_path / "gpu", device="cuda")
     for key in cpu:
         torch.testing.assert_close(gpu[key], cpu[key], atol=5e-3, rtol=2e-2, msg=key)
+
+
+def test_mirror_tta_swaps_left_and_right_and_treats_an_image_and_its_mirror_alike(synthetic: Path) -> None:
+    from dataclasses import replace
+
+    from controller.planning.actions import ALL_ACTIONS
+    from controller.planning.latent.checkpoint import load_checkpoint
+    from controller.planning.latent.evaluate import MIRRORED_ACTION, evaluate_loaded
+    from controller.planning.planners import DEFAULT_CHECKPOINT
+
+    for action in ALL_ACTIONS:
+        dx, dz = action.direction()
+        assert ALL_ACTIONS[int(MIRRORED_ACTION[action.index])].direction() == (-dx, dz)
+    ckpt = load_checkpoint(DEFAULT_CHECKPOINT)
+    index = load_index(synthetic)
+    data = load_images(index.split("test")[:24], ckpt.config.image_size, index.default_epsilon_px())
+    mirrored = replace(
+        data,
+        images=data.images.flip(-1).contiguous(),
+        labels=MIRRORED_ACTION[data.labels],
+        offsets=data.offsets * torch.tensor([-1.0, 1.0]),
+    )
+    words = ["center the gauge"] * len(data)
+    plain = evaluate_loaded(ckpt, data, instructions=words, mirror_tta=True)
+    flipped = evaluate_loaded(ckpt, mirrored, instructions=words, mirror_tta=True)
+    assert flipped.predictions == MIRRORED_ACTION[torch.tensor(plain.predictions)].tolist()
+    assert flipped.rank1 == plain.rank1
+    assert evaluate_loaded(ckpt, data, instructions=words).instructions == "train"  # off unless asked

@@ -36,6 +36,12 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("torch", "onnx", "auto"),
         help="planner backend for the latency measurement (auto: onnx when onnxruntime is installed)",
     )
+    p.add_argument(
+        "--mirror-tta",
+        action="store_true",
+        help="score each image with its left-right mirror image too (test-time augmentation; "
+        "evaluation only, the planner does not do it)",
+    )
     p.add_argument("--json", type=Path, default=None, help="also write the full result as JSON here")
     return p
 
@@ -45,7 +51,7 @@ def main(argv: list[str]) -> int:
     from controller.planning.latent.evaluate import evaluate_checkpoint
 
     result = evaluate_checkpoint(
-        args.model, args.data, args.instructions, args.split, args.epsilon_px, args.seed
+        args.model, args.data, args.instructions, args.split, args.epsilon_px, args.seed, args.mirror_tta
     )
     print(f"images: {result.n}   instructions: {result.instructions}")
     print(f"rank-1 accuracy: {100 * result.rank1:.2f}%")

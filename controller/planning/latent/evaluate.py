@@ -218,18 +218,35 @@ def _presence(
     return judge_presence(p_present, np.concatenate(negatives)).summary()
 
 
+MIRRORED_ACTION = torch.tensor([3 * (2 - i // 3) + i % 3 for i in range(NUM_ACTIONS)])
+"""(9,) the action index that a left-right mirror image asks for: left ↔ right, up/down unchanged."""
+
+
 def evaluate_loaded(
     ckpt: LoadedCheckpoint,
     data: ImageSet,
     setting: str = "train",
     seed: int = 0,
     instructions: Sequence[str] | None = None,
+    mirror_tta: bool = False,
 ) -> EvalResult:
-    """Rank-1 of `ckpt` on `data`; `instructions` (one per image) default to `instructions_for(setting)`."""
+    """Rank-1 of `ckpt` on `data`; `instructions` (one per image) default to `instructions_for(setting)`.
+
+    `mirror_tta`: score each image as the sum of its own distances and its left-right mirror image's,
+    the mirror's actions swapped back (test-time augmentation; evaluation only, the planner does not).
+    """
     if instructions is None:
         instructions = instructions_for(ckpt, data, setting, seed)
     dist = predict_distances(ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, data.images, instructions)
-    return score(dist, data, setting)
+    if mirror_tta:
+        mirrored = data.images.flip(-1).contiguous()
+        dist = (
+            dist
+            + predict_distances(
+                ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, mirrored, instructions
+            )[:, MIRRORED_ACTION]
+        )
+    return score(dist, data, setting + ("+mirror" if mirror_tta else ""))
 
 
 def evaluate_checkpoint(
@@ -239,6 +256,7 @@ def evaluate_checkpoint(
     split: str = "test",
     epsilon_px: float | None = None,
     seed: int = 0,
+    mirror_tta: bool = False,
 ) -> EvalResult:
     """Load a checkpoint and a dataset split, and evaluate (ε defaults to the dataset's)."""
     ckpt = load_checkpoint(model_dir)
@@ -246,7 +264,7 @@ def evaluate_checkpoint(
     eps = index.default_epsilon_px() if epsilon_px is None else epsilon_px
     data = load_images(index.split(split), ckpt.config.image_size, eps, desc=split)
     instructions = instructions_for(ckpt, data, setting, seed)
-    result = evaluate_loaded(ckpt, data, setting, seed, instructions)
+    result = evaluate_loaded(ckpt, data, setting, seed, instructions, mirror_tta)
     result.by_targets_in_view = _by_targets_in_view(result, data)
     if ckpt.model.presence is not None and data.targets:
         empty_rows = index.split("empty") if split == "test" else []
