@@ -98,3 +98,30 @@ def test_empty_instruction_rejected_and_long_one_truncated(planner: LatentPlanne
     long_text = "center the gauge " + "and keep it steady " * 30
     action, distances = planner.plan(img, long_text)
     assert np.isfinite(distances).all() and action.index == int(np.argmin(distances))
+
+
+def test_mirror_tta_adds_the_mirror_images_distances_left_and_right_swapped(planner: LatentPlanner) -> None:
+    import json
+
+    from controller.planning.actions import MIRRORED_INDEX
+
+    mirrored = LatentPlanner(planner.checkpoint_dir, threads=1, mirror=True)
+    assert mirrored.mirror and not planner.mirror  # off unless the checkpoint or the caller says so
+    images = _images(3)
+    _, plain = planner.plan_batch(images, "center the gauge")
+    _, flipped = planner.plan_batch([img[:, ::-1].copy() for img in images], "center the gauge")
+    actions, both = mirrored.plan_batch(images, "center the gauge")
+    np.testing.assert_allclose(both, plain + flipped[:, list(MIRRORED_INDEX)], rtol=1e-4, atol=1e-5)
+    assert [a.index for a in actions] == list(both.argmin(axis=1))
+    # A mirror image gets the mirrored choice.
+    mirror_actions, _ = mirrored.plan_batch([img[:, ::-1].copy() for img in images], "center the gauge")
+    assert [a.index for a in mirror_actions] == [MIRRORED_INDEX[a.index] for a in actions]
+
+    config = planner.checkpoint_dir / "config.json"
+    body = json.loads(config.read_text())
+    config.write_text(json.dumps({**body, "planner": {"mirror_tta": True}}))
+    try:
+        assert LatentPlanner(planner.checkpoint_dir, threads=1).mirror  # the checkpoint's own setting
+        assert not LatentPlanner(planner.checkpoint_dir, threads=1, mirror=False).mirror
+    finally:
+        config.write_text(json.dumps(body))

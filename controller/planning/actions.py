@@ -60,6 +60,8 @@ class Action:
 
 NUM_ACTIONS = 9
 ALL_ACTIONS: tuple[Action, ...] = tuple(Action.from_index(i) for i in range(NUM_ACTIONS))
+MIRRORED_INDEX: tuple[int, ...] = tuple(3 * (2 - i // 3) + i % 3 for i in range(NUM_ACTIONS))
+"""The action index that a left-right mirror image asks for, per index: left ↔ right, up/down kept."""
 
 
 def label_from_offset(du_px: float, dv_px: float, epsilon_px: float) -> Action:

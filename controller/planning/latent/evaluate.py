@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from controller.planning.actions import NUM_ACTIONS
+from controller.planning.actions import MIRRORED_INDEX, NUM_ACTIONS
 from controller.planning.latent.checkpoint import LoadedCheckpoint, load_checkpoint
 from controller.planning.latent.data import ImageSet, TargetRef, load_images, load_index, to_float
 from controller.planning.latent.errors import InstructionError
@@ -218,8 +218,8 @@ def _presence(
     return judge_presence(p_present, np.concatenate(negatives)).summary()
 
 
-MIRRORED_ACTION = torch.tensor([3 * (2 - i // 3) + i % 3 for i in range(NUM_ACTIONS)])
-"""(9,) the action index that a left-right mirror image asks for: left ↔ right, up/down unchanged."""
+MIRRORED_ACTION = torch.tensor(MIRRORED_INDEX)
+"""(9,) `actions.MIRRORED_INDEX`: the action a left-right mirror image asks for."""
 
 
 def evaluate_loaded(

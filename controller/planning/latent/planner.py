@@ -8,6 +8,10 @@ The per-decision part (`step_graph.StepGraph`: image → distances, presence) ru
 exported from the loaded checkpoint when the planner is made, on ONNX Runtime (`backend`):
 the same distances within 1e-4 (checked at export and in tests/test_latent_onnx.py), about a
 third of torch's latency on one thread (docs/reproduce/README.md).
+
+Mirror test-time augmentation (`mirror`; default: the checkpoint's `planner.mirror_tta` in its
+config.json, else off): each decision also scores the left-right mirror image and adds its
+distances, left and right swapped back, in the same batch (about twice the work per decision).
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ import cv2
 import numpy as np
 import torch
 
-from controller.planning.actions import Action
+from controller.planning.actions import MIRRORED_INDEX, Action
 from controller.planning.latent.checkpoint import load_checkpoint
 from controller.planning.latent.errors import ImageInputError
 from controller.planning.latent.image_encoder import fused_for_inference
@@ -46,6 +50,7 @@ class LatentPlanner:
         threads: int | None = 1,
         cache_size: int = 64,
         backend: str = "auto",
+        mirror: bool | None = None,
     ) -> None:
         if threads is not None:
             torch.set_num_threads(threads)
@@ -56,6 +61,8 @@ class LatentPlanner:
         self.tokenizer = ckpt.tokenizer
         self.config = ckpt.config
         self.meta = ckpt.meta
+        planner_meta = self.meta.get("planner") if isinstance(self.meta.get("planner"), dict) else {}
+        self.mirror = bool(planner_meta.get("mirror_tta", False)) if mirror is None else mirror
         self._goal_image = ckpt.goal_image_embedding.unsqueeze(0)  # (1, d)
         self._cache: OrderedDict[str, tuple[torch.Tensor, torch.Tensor]] = OrderedDict()
         self._cache_size = cache_size
@@ -94,13 +101,19 @@ class LatentPlanner:
         x = torch.from_numpy(np.stack([self.prepare(img) for img in images]))  # (N, S, S, 3) uint8
         x = x.permute(0, 3, 1, 2).to(torch.float32).div_(255.0)  # (N, 3, S, S), channels-last strides
         n = x.shape[0]
-        inputs = (x, text.expand(n, -1), z_goal.expand(n, -1))
+        if self.mirror:
+            x = torch.cat([x, x.flip(-1)])  # the mirror images in the same batch
+        m = x.shape[0]
+        inputs = (x, text.expand(m, -1), z_goal.expand(m, -1))
         if self._onnx is None:
             outputs = [t.numpy() for t in self._step(*inputs)]
         else:
             outputs = self._onnx.run(*(t.numpy() for t in inputs))
-        dist = outputs[0].astype(np.float32, copy=False)  # (N, 9)
-        presence = outputs[1].astype(np.float32, copy=False) if len(outputs) > 1 else None  # (N,)
+        dist = outputs[0].astype(np.float32, copy=False)  # (M, 9)
+        presence = outputs[1].astype(np.float32, copy=False) if len(outputs) > 1 else None  # (M,)
+        if self.mirror:
+            dist = dist[:n] + dist[n:][:, list(MIRRORED_INDEX)]
+            presence = None if presence is None else (presence[:n] + presence[n:]) / 2.0
         return [Action.from_index(int(i)) for i in dist.argmin(axis=1)], dist, presence
 
     def prepare(self, image: np.ndarray) -> np.ndarray:
