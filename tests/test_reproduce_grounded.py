@@ -72,10 +72,12 @@ def test_grounded_reproduction_trains_each_seed_once_and_reports(tmp_path: Path)
     out = tmp_path / "report"
     report = reproduce_grounded([one, two], [one, two], look, out, seeds=2, epochs=1, model_overrides=TINY)
     text = report.read_text()
-    assert "| one (" in text and "| two (" in text and f"| {LOOK} (" in text and "gap:" in text
+    assert "| one (" in text and "| two (" in text and f"| {LOOK} (" in text and text.count("gap:") == 2
+    assert "## With its mirror image" in text  # every test set also scored as the planner can run
     data = json.loads((out / "grounded.json").read_text())
     assert [s["seed"] for s in data["seeds"]] == [0, 1]
-    assert set(data["seeds"][0]["tests"]) == {"one", "two", LOOK}
+    assert set(data["seeds"][0]["tests"]) == set(data["seeds"][0]["tests_mirror"]) == {"one", "two", LOOK}
+    assert "look_gap_mirror" in data["summary"]
     assert data["seeds"][0]["epochs"] == 1
     # A second call reuses both seeds: it needs no training data, and changes nothing recorded.
     before = (out / "runs" / "grounded_s0" / "eval.json").read_text()

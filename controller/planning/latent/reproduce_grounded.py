@@ -29,6 +29,9 @@ EVAL_FILE = "eval.json"
 REPORT_FILE = "grounded.md"
 SUMMARY_FILE = "grounded.json"
 LOOK = "heldout-look"
+MODES = (("tests", False), ("tests_mirror", True))
+"""Each test set is scored as the image alone and with its mirror image (`evaluate --mirror-tta`, what
+the planner does where its checkpoint asks for it)."""
 
 
 @dataclass(frozen=True)
@@ -81,17 +84,18 @@ def run_grounded_job(job: GroundedJob) -> dict[str, Any]:
         "train_seconds": metrics["seconds"],
         "epochs": metrics["train"]["epochs"],
         "best_val_accuracy": metrics["best_val_accuracy"],
-        "tests": {},
     }
-    for name, folder in job.tests:
-        ev = evaluate_checkpoint(job.run_dir, folder, "heldout")
-        summary["tests"][name] = {
-            "rank1": ev.rank1,
-            "n": ev.n,
-            "by_targets_in_view": ev.by_targets_in_view,
-            "auroc": None if ev.presence is None else ev.presence.get("auroc"),
-            "twins": _has_twins(folder),
-        }
+    for key, mirror in MODES:
+        summary[key] = {}
+        for name, folder in job.tests:
+            ev = evaluate_checkpoint(job.run_dir, folder, "heldout", mirror_tta=mirror)
+            summary[key][name] = {
+                "rank1": ev.rank1,
+                "n": ev.n,
+                "by_targets_in_view": ev.by_targets_in_view,
+                "auroc": None if ev.presence is None else ev.presence.get("auroc"),
+                "twins": _has_twins(folder),
+            }
     done.write_text(json.dumps(summary) + "\n")
     return summary
 
@@ -101,10 +105,10 @@ def _has_twins(folder: Path) -> bool:
     return bool(meta.get("protocol", {}).get("twins", False))
 
 
-def look_gap(summary: dict[str, Any]) -> dict[str, float] | None:
+def look_gap(summary: dict[str, Any], key: str = "tests") -> dict[str, float] | None:
     """One seed's held-out look rank-1 against the no-twins test sets' rank-1 at the same targets in view,
     weighted by the held-out set's own mix of targets in view; None without a held-out look."""
-    tests = summary["tests"]
+    tests = summary[key]
     look = tests.get(LOOK)
     if look is None:
         return None
@@ -176,24 +180,28 @@ def _spread(values: list[float]) -> dict[str, float]:
 
 
 def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
-    """Mean, sd, min and max over seeds of every test set's rank-1 and AUROC, and of the look gap."""
-    names = list(results[0]["tests"])
-    table: dict[str, Any] = {"seeds": [r["seed"] for r in results], "tests": {}}
-    for name in names:
-        rank1 = [r["tests"][name]["rank1"] for r in results]
-        auroc = [r["tests"][name]["auroc"] for r in results if r["tests"][name]["auroc"] is not None]
-        table["tests"][name] = {
-            "n": results[0]["tests"][name]["n"],
-            "rank1": _spread(rank1),
-            "auroc": _spread(auroc) if auroc else None,
-        }
-    gaps = [g for g in (look_gap(r) for r in results) if g is not None]
-    if gaps:
-        table["look_gap"] = {
-            "heldout": _spread([g["heldout"] for g in gaps]),
-            "in_distribution": _spread([g["in_distribution"] for g in gaps]),
-            "gap_points": _spread([100 * (g["in_distribution"] - g["heldout"]) for g in gaps]),
-        }
+    """Mean, sd, min and max over seeds of every test set's rank-1 and AUROC, and of the look gap, for
+    each scoring mode (`MODES`: "tests", "tests_mirror"; the latter's gap is "look_gap_mirror")."""
+    table: dict[str, Any] = {"seeds": [r["seed"] for r in results]}
+    for key, _ in MODES:
+        if key not in results[0]:
+            continue  # an eval.json from before the mirror mode
+        table[key] = {}
+        for name in results[0][key]:
+            cells = [r[key][name] for r in results]
+            aurocs = [c["auroc"] for c in cells if c["auroc"] is not None]
+            table[key][name] = {
+                "n": cells[0]["n"],
+                "rank1": _spread([c["rank1"] for c in cells]),
+                "auroc": _spread(aurocs) if aurocs else None,
+            }
+        gaps = [g for g in (look_gap(r, key) for r in results) if g is not None]
+        if gaps:
+            table[key.replace("tests", "look_gap")] = {
+                "heldout": _spread([g["heldout"] for g in gaps]),
+                "in_distribution": _spread([g["in_distribution"] for g in gaps]),
+                "gap_points": _spread([100 * (g["in_distribution"] - g["heldout"]) for g in gaps]),
+            }
     table["train_seconds"] = _spread([r["train_seconds"] for r in results])
     return table
 
@@ -214,27 +222,39 @@ def render_report(
         "",
         f"Trained on {', '.join(str(d) for d in train_dirs)} with `--preset grounded`; seeds {seeds}. "
         "Held-out phrasings and synonyms on every test set. Mean ± sd over seeds (min–max).",
-        "",
-        "| test set | images | rank-1 | not in view: AUROC | per seed |",
-        "| --- | --- | --- | --- | --- |",
     ]
-    for name, folder in tests:
-        cell = table["tests"][name]
-        auroc = "" if cell["auroc"] is None else f"{cell['auroc']['mean']:.3f} ± {cell['auroc']['sd']:.3f}"
-        per_seed = " / ".join(f"{100 * r['tests'][name]['rank1']:.2f}" for r in results)
-        lines.append(f"| {name} (`{folder}`) | {cell['n']} | {_pct(cell['rank1'])} | {auroc} | {per_seed} |")
-    gap = table.get("look_gap")
-    if gap:
+    titles = {"tests": "Each image alone", "tests_mirror": "With its mirror image (`--mirror-tta`)"}
+    for key, _ in MODES:
+        if key not in table:
+            continue
         lines += [
             "",
-            "Held-out look against in-distribution test images (no twins) with the same number of targets",
-            "in view, weighted by the held-out set's mix:",
+            f"## {titles[key]}",
             "",
-            f"- held-out look: {_pct(gap['heldout'])}",
-            f"- in distribution: {_pct(gap['in_distribution'])}",
-            f"- gap: {gap['gap_points']['mean']:.2f} points ± {gap['gap_points']['sd']:.2f} "
-            f"({gap['gap_points']['min']:.2f} to {gap['gap_points']['max']:.2f})",
+            "| test set | images | rank-1 | not in view: AUROC | per seed |",
+            "| --- | --- | --- | --- | --- |",
         ]
+        for name, folder in tests:
+            cell = table[key][name]
+            auroc = (
+                "" if cell["auroc"] is None else f"{cell['auroc']['mean']:.3f} ± {cell['auroc']['sd']:.3f}"
+            )
+            per_seed = " / ".join(f"{100 * r[key][name]['rank1']:.2f}" for r in results)
+            lines.append(
+                f"| {name} (`{folder}`) | {cell['n']} | {_pct(cell['rank1'])} | {auroc} | {per_seed} |"
+            )
+        gap = table.get(key.replace("tests", "look_gap"))
+        if gap:
+            lines += [
+                "",
+                "Held-out look against in-distribution test images (no twins) with the same number of",
+                "targets in view, weighted by the held-out set's mix:",
+                "",
+                f"- held-out look: {_pct(gap['heldout'])}",
+                f"- in distribution: {_pct(gap['in_distribution'])}",
+                f"- gap: {gap['gap_points']['mean']:.2f} points ± {gap['gap_points']['sd']:.2f} "
+                f"({gap['gap_points']['min']:.2f} to {gap['gap_points']['max']:.2f})",
+            ]
     t = table["train_seconds"]
     lines += ["", f"Training: {t['mean']:.0f} s per seed on average ({t['min']:.0f}–{t['max']:.0f} s).", ""]
     return "\n".join(lines)
