@@ -93,55 +93,44 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _given(**values: object) -> dict[str, object]:
+    """The options given on the command line (None: not given, the preset's value stays)."""
+    return {k: v for k, v in values.items() if v is not None}
+
+
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
-    model_over = {
-        k: v
-        for k, v in (
-            ("image_size", args.image_size),
-            ("base_width", args.width),
-            ("coord_channels", None if args.coord_channels is None else args.coord_channels == "on"),
-            ("pooling", args.pooling),
-            ("fusion", args.fusion),
-        )
-        if v is not None
-    }
-    train_over: dict[str, object] = {}
-    if args.lr_schedule:
-        train_over["lr_schedule"] = args.lr_schedule
-    if args.lr is not None:
-        train_over["learning_rate"] = args.lr
-    if args.temperature is not None:
-        train_over["temperature"] = args.temperature
-    if args.batch_size is not None:
-        train_over["batch_size"] = args.batch_size
-    aug_over: dict[str, object] = {}
-    if args.translate is not None:
-        aug_over["translate"] = args.translate
-    if args.hflip is not None:
-        aug_over["hflip"] = args.hflip == "on"
-    if args.scale is not None:
-        aug_over["scale"] = args.scale
-    if args.hue is not None:
-        aug_over["hue"] = args.hue
-    if args.saturation is not None:
-        aug_over["saturation"] = args.saturation
-    if args.brightness is not None:
-        aug_over["brightness"] = args.brightness
-    if args.contrast is not None:
-        aug_over["contrast"] = args.contrast
-    if args.named_fraction is not None:
-        train_over["named_fraction"] = args.named_fraction
-    if args.channels_last is not None:
-        train_over["channels_last"] = args.channels_last == "on"
-    if args.balance_kinds is not None:
-        train_over["balance_kinds"] = args.balance_kinds == "on"
+    on = {None: None, "on": True, "off": False}  # the on/off switches; None keeps the preset's
+    model_over = _given(
+        image_size=args.image_size,
+        base_width=args.width,
+        coord_channels=on[args.coord_channels],
+        pooling=args.pooling,
+        fusion=args.fusion,
+    )
+    train_over: dict[str, object] = _given(
+        lr_schedule=args.lr_schedule,
+        learning_rate=args.lr,
+        temperature=args.temperature,
+        batch_size=args.batch_size,
+        named_fraction=args.named_fraction,
+        channels_last=on[args.channels_last],
+        balance_kinds=on[args.balance_kinds],
+        epsilon_px=args.epsilon_px,
+    )
+    aug_over = _given(
+        translate=args.translate,
+        hflip=on[args.hflip],
+        scale=args.scale,
+        hue=args.hue,
+        saturation=args.saturation,
+        brightness=args.brightness,
+        contrast=args.contrast,
+    )
     if aug_over:
         train_over["augment"] = replace(PRESETS[args.preset].train.augment, **aug_over)
     if args.no_augment:
         train_over["augment"] = AugmentConfig(enabled=False)
-    if args.epsilon_px is not None:
-        train_over["epsilon_px"] = args.epsilon_px
     run = run_configs(
         args.preset,
         distance=args.distance,

@@ -239,14 +239,15 @@ def evaluate_loaded(
         instructions = instructions_for(ckpt, data, setting, seed)
     dist = predict_distances(ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, data.images, instructions)
     if mirror_tta:
-        mirrored = data.images.flip(-1).contiguous()
-        dist = (
-            dist
-            + predict_distances(
-                ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, mirrored, instructions
-            )[:, MIRRORED_ACTION]
-        )
+        dist = dist + _mirrored_distances(ckpt, data, instructions)
     return score(dist, data, setting + ("+mirror" if mirror_tta else ""))
+
+
+def _mirrored_distances(ckpt: LoadedCheckpoint, data: ImageSet, instructions: Sequence[str]) -> torch.Tensor:
+    """(N, 9) distances of every image's left-right mirror image, in the original image's action order."""
+    mirrored = data.images.flip(-1).contiguous()
+    dist = predict_distances(ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, mirrored, instructions)
+    return dist[:, MIRRORED_ACTION]
 
 
 def evaluate_checkpoint(
@@ -259,13 +260,28 @@ def evaluate_checkpoint(
     mirror_tta: bool = False,
 ) -> EvalResult:
     """Load a checkpoint and a dataset split, and evaluate (ε defaults to the dataset's)."""
+    return evaluate_checkpoint_modes(model_dir, data_dir, setting, split, epsilon_px, seed, (mirror_tta,))[0]
+
+
+def evaluate_checkpoint_modes(
+    model_dir: Path,
+    data_dir: Path,
+    setting: str = "train",
+    split: str = "test",
+    epsilon_px: float | None = None,
+    seed: int = 0,
+    mirror_modes: Sequence[bool] = (False,),
+) -> list[EvalResult]:
+    """`evaluate_checkpoint` once per mirror mode, loading, encoding and judging presence only once
+    (presence is scored on each image alone, so every mode carries the same figures)."""
     ckpt = load_checkpoint(model_dir)
     index = load_index(data_dir)
     eps = index.default_epsilon_px() if epsilon_px is None else epsilon_px
     data = load_images(index.split(split), ckpt.config.image_size, eps, desc=split)
     instructions = instructions_for(ckpt, data, setting, seed)
-    result = evaluate_loaded(ckpt, data, setting, seed, instructions, mirror_tta)
-    result.by_targets_in_view = _by_targets_in_view(result, data)
+    dist = predict_distances(ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, data.images, instructions)
+    mirrored = _mirrored_distances(ckpt, data, instructions) if any(mirror_modes) else None
+    presence = None
     if ckpt.model.presence is not None and data.targets:
         empty_rows = index.split("empty") if split == "test" else []
         empty = (
@@ -273,6 +289,12 @@ def evaluate_checkpoint(
             if empty_rows
             else None
         )
-        result.presence = _presence(ckpt, data, instructions, empty, setting, seed)
-    log.info("%s on %s/%s (%d images): rank-1 %.4f", model_dir, data_dir, split, result.n, result.rank1)
-    return result
+        presence = _presence(ckpt, data, instructions, empty, setting, seed)
+    results = []
+    for mirror in mirror_modes:
+        result = score(dist + mirrored if mirror else dist, data, setting + ("+mirror" if mirror else ""))
+        result.by_targets_in_view = _by_targets_in_view(result, data)
+        result.presence = presence
+        log.info("%s on %s/%s (%d images): rank-1 %.4f", model_dir, data_dir, split, result.n, result.rank1)
+        results.append(result)
+    return results

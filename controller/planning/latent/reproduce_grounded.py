@@ -29,7 +29,7 @@ EVAL_FILE = "eval.json"
 REPORT_FILE = "grounded.md"
 SUMMARY_FILE = "grounded.json"
 LOOK = "heldout-look"
-MODES = (("tests", False), ("tests_mirror", True))
+MODES = (("tests", "look_gap", False), ("tests_mirror", "look_gap_mirror", True))
 """Each test set is scored as the image alone and with its mirror image (`evaluate --mirror-tta`, what
 the planner does where its checkpoint asks for it)."""
 
@@ -62,7 +62,7 @@ def named_test_sets(tests: Sequence[Path], heldout_look: Path | None) -> tuple[t
 
 def run_grounded_job(job: GroundedJob) -> dict[str, Any]:
     """Train (unless finished) and evaluate one seed; returns (and stores) its summary."""
-    from controller.planning.latent.evaluate import evaluate_checkpoint
+    from controller.planning.latent.evaluate import evaluate_checkpoint_modes
     from controller.planning.latent.train import METRICS_FILE, train
 
     done = job.run_dir / EVAL_FILE
@@ -85,16 +85,19 @@ def run_grounded_job(job: GroundedJob) -> dict[str, Any]:
         "epochs": metrics["train"]["epochs"],
         "best_val_accuracy": metrics["best_val_accuracy"],
     }
-    for key, mirror in MODES:
+    for key, _, _ in MODES:
         summary[key] = {}
-        for name, folder in job.tests:
-            ev = evaluate_checkpoint(job.run_dir, folder, "heldout", mirror_tta=mirror)
+    modes = [mirror for _, _, mirror in MODES]
+    for name, folder in job.tests:
+        twins = _has_twins(folder)
+        results = evaluate_checkpoint_modes(job.run_dir, folder, "heldout", mirror_modes=modes)
+        for (key, _, _), ev in zip(MODES, results, strict=True):
             summary[key][name] = {
                 "rank1": ev.rank1,
                 "n": ev.n,
                 "by_targets_in_view": ev.by_targets_in_view,
                 "auroc": None if ev.presence is None else ev.presence.get("auroc"),
-                "twins": _has_twins(folder),
+                "twins": twins,
             }
     done.write_text(json.dumps(summary) + "\n")
     return summary
@@ -183,7 +186,7 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
     """Mean, sd, min and max over seeds of every test set's rank-1 and AUROC, and of the look gap, for
     each scoring mode (`MODES`: "tests", "tests_mirror"; the latter's gap is "look_gap_mirror")."""
     table: dict[str, Any] = {"seeds": [r["seed"] for r in results]}
-    for key, _ in MODES:
+    for key, gap_key, _ in MODES:
         if key not in results[0]:
             continue  # an eval.json from before the mirror mode
         table[key] = {}
@@ -197,7 +200,7 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
             }
         gaps = [g for g in (look_gap(r, key) for r in results) if g is not None]
         if gaps:
-            table[key.replace("tests", "look_gap")] = {
+            table[gap_key] = {
                 "heldout": _spread([g["heldout"] for g in gaps]),
                 "in_distribution": _spread([g["in_distribution"] for g in gaps]),
                 "gap_points": _spread([100 * (g["in_distribution"] - g["heldout"]) for g in gaps]),
@@ -224,7 +227,7 @@ def render_report(
         "Held-out phrasings and synonyms on every test set. Mean ± sd over seeds (min–max).",
     ]
     titles = {"tests": "Each image alone", "tests_mirror": "With its mirror image (`--mirror-tta`)"}
-    for key, _ in MODES:
+    for key, gap_key, _ in MODES:
         if key not in table:
             continue
         lines += [
@@ -243,7 +246,7 @@ def render_report(
             lines.append(
                 f"| {name} (`{folder}`) | {cell['n']} | {_pct(cell['rank1'])} | {auroc} | {per_seed} |"
             )
-        gap = table.get(key.replace("tests", "look_gap"))
+        gap = table.get(gap_key)
         if gap:
             lines += [
                 "",
