@@ -1,5 +1,7 @@
 """Augmentation: the paper's set never changes a label; label-exact geometry moves targets exactly."""
 
+import math
+
 import cv2
 import numpy as np
 import pytest
@@ -11,6 +13,7 @@ from controller.planning.latent.augment import (
     colour_jitter,
     geometric,
     labels_of,
+    relight,
     shear,
     sheared_offsets,
 )
@@ -69,6 +72,60 @@ def test_colour_jitter_stays_in_range_and_changes_pixels() -> None:
     y = colour_jitter(x.clone(), AugmentConfig(), gen)
     assert y.shape == x.shape and float(y.min()) >= 0.0 and float(y.max()) <= 1.0
     assert float((y - x).abs().mean()) > 0.01
+
+
+def test_relight_falls_off_across_the_image_within_its_bound() -> None:
+    gen = torch.Generator().manual_seed(2)
+    flat = torch.full((64, 3, 33, 33), 0.4)
+    out = relight(flat.clone(), AugmentConfig(relight=0.5), gen)
+    grey = out[:, 0]
+    assert torch.equal(out[:, 0], out[:, 2])  # light, not paint: every channel alike
+    ratio = grey.amax(dim=(1, 2)) / grey.amin(dim=(1, 2))
+    assert float(ratio.max()) <= math.exp(2 * 0.5 * math.sqrt(2)) + 1e-4  # corner to corner at most
+    assert float(ratio.max()) > math.exp(0.5)  # some images are lit from one side
+    # the centre keeps its level (the gain is exp(0) there); the field is a plane in log space
+    assert torch.allclose(grey[:, 16, 16], torch.full((64,), 0.4), atol=1e-5)
+    log = grey.log()
+    assert torch.allclose(log[:, 0, 0] + log[:, 32, 32], 2 * log[:, 16, 16], atol=1e-4)
+
+
+def test_gamma_and_tint_stay_in_their_ranges() -> None:
+    gen = torch.Generator().manual_seed(4)
+    flat = torch.full((256, 3, 4, 4), 0.5)
+    dark = relight(flat.clone(), AugmentConfig(gamma=0.5), gen)
+    lo, hi = 0.5**1.5, 0.5 ** (1 / 1.5)
+    assert float(dark.min()) >= lo - 1e-6 and float(dark.max()) <= hi + 1e-6
+    assert float(dark.min()) < 0.45 and float(dark.max()) > 0.55  # both darker and flatter drawn
+    tinted = relight(flat.clone(), AugmentConfig(tint=0.2), gen)
+    gains = tinted[:, :, 0, 0] / 0.5
+    assert float(gains.min()) >= 0.8 - 1e-6 and float(gains.max()) <= 1.2 + 1e-6
+    assert float((gains[:, 0] - gains[:, 1]).abs().max()) > 0.1  # the channels move apart
+
+
+def test_light_settings_off_leave_the_random_stream_alone() -> None:
+    """Presets without relight, gamma or tint draw exactly as before they existed."""
+    x, offsets = torch.rand(4, 3, 32, 32), torch.tensor([[5.0, -7.0]] * 4)
+    cfg = AugmentConfig(translate=0.25)
+    a = augment(x, offsets, (32, 32), 2.0, cfg, torch.Generator().manual_seed(0))
+    gen = torch.Generator().manual_seed(0)
+    b = geometric(colour_jitter(x.clone(), cfg, gen), offsets, (32, 32), 2.0, cfg, gen)
+    noise = torch.randn(x.shape, generator=gen) * cfg.noise_std
+    assert torch.equal(a.images, (b.images + noise).clamp(0.0, 1.0))
+    lit = augment(
+        x,
+        offsets,
+        (32, 32),
+        2.0,
+        AugmentConfig(translate=0.25, relight=0.5),
+        torch.Generator().manual_seed(0),
+    )
+    assert not torch.equal(lit.images, a.images)
+
+
+@pytest.mark.parametrize("bad", [{"relight": -0.1}, {"gamma": 3.0}, {"tint": 1.0}])
+def test_light_settings_out_of_range_are_refused(bad: dict[str, float]) -> None:
+    with pytest.raises(ValueError, match="relight"):
+        AugmentConfig(**bad)
 
 
 def test_disabled_augmentation_is_identity() -> None:

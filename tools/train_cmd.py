@@ -76,6 +76,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--brightness", type=float, default=None, help="brightness jitter")
     p.add_argument("--contrast", type=float, default=None, help="contrast jitter")
     p.add_argument(
+        "--relight", type=float, default=None, help="light falling off across the image, log-gain (0 = off)"
+    )
+    p.add_argument("--gamma", type=float, default=None, help="tone-curve jitter (0 = off)")
+    p.add_argument("--tint", type=float, default=None, help="per-channel gain jitter (0 = off)")
+    p.add_argument(
         "--named-fraction",
         type=float,
         default=None,
@@ -126,6 +131,9 @@ def main(argv: list[str]) -> int:
         saturation=args.saturation,
         brightness=args.brightness,
         contrast=args.contrast,
+        relight=args.relight,
+        gamma=args.gamma,
+        tint=args.tint,
     )
     if aug_over:
         train_over["augment"] = replace(PRESETS[args.preset].train.augment, **aug_over)

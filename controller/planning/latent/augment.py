@@ -58,6 +58,35 @@ def colour_jitter(x: torch.Tensor, cfg: AugmentConfig, gen: torch.Generator) -> 
     return x.clamp_(0.0, 1.0)
 
 
+def relight(x: torch.Tensor, cfg: AugmentConfig, gen: torch.Generator) -> torch.Tensor:
+    """Light and paint the scene family never showed, on (B, 3, S, S) images in [0, 1].
+
+    - `relight`: light from one side: a gain exp(g·(cos φ·u + sin φ·v)) over the image, (u, v) in
+      [-1, 1], g uniform in [-relight, relight], φ uniform, so one side is up to exp(2·relight) times
+      brighter than the other (a lamp low to the side, a shadowed half);
+    - `gamma`: a tone curve x**γ, γ log-uniform in [1/(1+gamma), 1+gamma] (dim ambient light
+      darkens the mid-tones more than the highlights);
+    - `tint`: white balance and paint: each channel's gain uniform in [1-tint, 1+tint].
+
+    Each draw happens only where its setting is on, so configurations without them keep their
+    random streams (and their results) unchanged. No label changes: nothing moves.
+    """
+    b, _, h, w = x.shape
+    if cfg.relight > 0:
+        slope = _uniform(b, cfg.relight, gen)
+        phi = torch.rand(b, generator=gen) * 2.0 * math.pi
+        u = torch.linspace(-1.0, 1.0, w).view(1, 1, w)
+        v = torch.linspace(-1.0, 1.0, h).view(1, h, 1)
+        field = (torch.cos(phi).view(b, 1, 1) * u + torch.sin(phi).view(b, 1, 1) * v) * slope.view(b, 1, 1)
+        x = x * torch.exp(field).unsqueeze(1)
+    if cfg.gamma > 0:
+        g = torch.exp(_uniform(b, math.log1p(cfg.gamma), gen)).view(b, 1, 1, 1)
+        x = x.clamp(min=0.0) ** g
+    if cfg.tint > 0:
+        x = x * (1.0 + (torch.rand(b, 3, generator=gen) * 2.0 - 1.0) * cfg.tint).view(b, 3, 1, 1)
+    return x.clamp_(0.0, 1.0)
+
+
 def shear_matrices(b: int, shear_deg: float, gen: torch.Generator) -> torch.Tensor:
     """(B, 2, 2) output→input maps A = [[1, sx], [sy, 1]], |sx|, |sy| ≤ tan(shear_deg)."""
     limit = math.tan(math.radians(shear_deg))
@@ -189,6 +218,8 @@ def augment(
     if not cfg.enabled:
         return Augmented(x, offsets_px)
     x = colour_jitter(x, cfg, gen)
+    if cfg.relight > 0 or cfg.gamma > 0 or cfg.tint > 0:
+        x = relight(x, cfg, gen)
     if label_exact(cfg):
         x, offsets_px = geometric(x, offsets_px, size_px, epsilon_px, cfg, gen)
     elif cfg.shear_deg > 0:

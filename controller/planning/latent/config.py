@@ -177,6 +177,10 @@ class AugmentConfig:
     translate_inset: float = 0.02  # the target's centre stays this fraction of the half-size inside
     hflip: bool = False  # mirror half the samples, du → −du (also mirrors text on dials)
     scale: float = 0.0  # zoom about the centre, log-uniform in [1/(1+scale), 1+scale]; offsets scale too
+    # Light and paint outside the scene family (not in the paper; see augment.relight). 0 = off.
+    relight: float = 0.0  # light falling off across the image: gain exp(±relight) at opposite edges
+    gamma: float = 0.0  # tone curve x**γ, γ log-uniform in [1/(1+gamma), 1+gamma] (darker or flatter)
+    tint: float = 0.0  # white balance: each channel's gain in [1-tint, 1+tint]
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.translate <= 0.5:
@@ -185,6 +189,8 @@ class AugmentConfig:
             raise ValueError(f"scale must be in [0, 1], got {self.scale}")
         if not 0.0 <= self.translate_prob <= 1.0 or not 0.0 <= self.translate_inset < 1.0:
             raise ValueError("translate_prob must be in [0, 1] and translate_inset in [0, 1)")
+        if not (0.0 <= self.relight <= 2.0 and 0.0 <= self.gamma <= 2.0 and 0.0 <= self.tint < 1.0):
+            raise ValueError("relight and gamma must be in [0, 2], tint in [0, 1)")
 
 
 @dataclass(frozen=True)
