@@ -39,6 +39,31 @@ def test_look_gap_compares_like_with_like_and_leaves_twins_out() -> None:
     assert look_gap({"tests": {"paper": summary["tests"]["paper"]}}) is None
 
 
+def test_kind_matched_gap_takes_the_draw_of_kinds_out() -> None:
+    """A held-out set that drew more of the hardest kind looks worse matched on targets alone; matched on
+    the named kind as well, the same per-kind accuracy is no gap."""
+    by_kind = {"gauge/1": _cell(20, 1.0), "switchbox/1": _cell(20, 0.8)}
+    look_kinds = {"gauge/1": _cell(10, 1.0), "switchbox/1": _cell(30, 0.8)}
+    summary = {
+        "tests": {
+            "paper": {
+                "by_targets_in_view": {"1": _cell(40, 0.9)},
+                "by_kind_and_targets": by_kind,
+                "twins": False,
+            },
+            LOOK: {"by_targets_in_view": {"1": _cell(40, 0.85)}, "by_kind_and_targets": look_kinds},
+        }
+    }
+    plain = look_gap(summary)
+    kind = look_gap(summary, by="by_kind_and_targets")
+    assert plain is not None and kind is not None
+    assert plain["in_distribution"] - plain["heldout"] == pytest.approx(0.05)
+    assert kind["heldout"] == pytest.approx(0.85)
+    assert kind["in_distribution"] == pytest.approx(0.85)  # (10 · 1.0 + 30 · 0.8) / 40
+    del summary["tests"][LOOK]["by_kind_and_targets"]  # an eval.json from before the grouping
+    assert look_gap(summary, by="by_kind_and_targets") is None
+
+
 def test_summary_spreads_over_seeds() -> None:
     def seed(s: int, r: float) -> dict:
         return {
@@ -72,12 +97,12 @@ def test_grounded_reproduction_trains_each_seed_once_and_reports(tmp_path: Path)
     out = tmp_path / "report"
     report = reproduce_grounded([one, two], [one, two], look, out, seeds=2, epochs=1, model_overrides=TINY)
     text = report.read_text()
-    assert "| one (" in text and "| two (" in text and f"| {LOOK} (" in text and text.count("gap:") == 2
+    assert "| one (" in text and "| two (" in text and f"| {LOOK} (" in text and text.count("gap:") == 4
     assert "## With its mirror image" in text  # every test set also scored as the planner can run
     data = json.loads((out / "grounded.json").read_text())
     assert [s["seed"] for s in data["seeds"]] == [0, 1]
     assert set(data["seeds"][0]["tests"]) == set(data["seeds"][0]["tests_mirror"]) == {"one", "two", LOOK}
-    assert "look_gap_mirror" in data["summary"]
+    assert {"look_gap", "look_gap_kind", "look_gap_mirror", "look_gap_mirror_kind"} <= set(data["summary"])
     assert data["seeds"][0]["epochs"] == 1
     # A second call reuses both seeds: it needs no training data, and changes nothing recorded.
     before = (out / "runs" / "grounded_s0" / "eval.json").read_text()

@@ -15,7 +15,7 @@ def test_default_yaml_is_the_default_scene() -> None:
     assert load_scene_config(SCENES_DIR / "default.yaml") == DEFAULT_SCENE
 
 
-@pytest.mark.parametrize("path", sorted(SCENES_DIR.glob("*.yaml")), ids=lambda p: p.name)
+@pytest.mark.parametrize("path", sorted(SCENES_DIR.glob("**/*.yaml")), ids=lambda p: p.name)
 def test_every_shipped_scene_file_loads(path: Path) -> None:
     config = load_scene_config(path)
     assert config.target.kinds  # at least one kind to draw
@@ -118,3 +118,19 @@ def test_the_wide_training_family_keeps_the_held_out_look_out() -> None:
     held_lo, held_hi = held.lighting.azimuth_deg
     assert held_hi < lo or hi < held_lo, (wide.lighting.azimuth_deg, held.lighting.azimuth_deg)
     assert wide.target.bezel_colours == held.target.bezel_colours  # the words name these in both
+
+
+FACTORS = {"train_light": ("lighting",), "train_paint": ("wall", "floor"), "train_clutter": ("clutter",)}
+
+
+@pytest.mark.parametrize("name", sorted(FACTORS))
+def test_each_look_factor_file_changes_one_factor_of_the_held_out_look(name: str) -> None:
+    """scenes/look_factors/*.yaml: the held-out look with exactly its factor taken from train_wide.yaml."""
+    held = load_scene_config(SCENES_DIR / "heldout_look.yaml")
+    wide = load_scene_config(SCENES_DIR / "train_wide.yaml")
+    factor = load_scene_config(SCENES_DIR / "look_factors" / f"{name}.yaml")
+    assert sorted(FACTORS) == sorted(p.stem for p in (SCENES_DIR / "look_factors").glob("*.yaml"))
+    for part in ("target", "wall", "floor", "clutter", "lighting"):
+        expected = wide if part in FACTORS[name] else held
+        assert getattr(factor, part) == getattr(expected, part), part
+    assert factor != held

@@ -46,11 +46,22 @@ class EvalResult:
     ids: list[str] = field(default_factory=list)
     by_targets_in_view: dict[str, dict[str, float]] = field(default_factory=dict)
     """Rank-1 by how many targets the image shows ("1", "2", "3", "4"): {"n", "rank1"}."""
+    by_kind_and_targets: dict[str, dict[str, float]] = field(default_factory=dict)
+    """Rank-1 by the named target's kind and how many targets the image shows ("gauge/2"): {"n", "rank1"}."""
     presence: dict[str, float | int] | None = None
     """`presence_eval.PresenceResult.summary()` for a checkpoint with a presence head."""
 
     def summary(self) -> dict[str, Any]:
-        keys = ("rank1", "x_accuracy", "z_accuracy", "n", "instructions", "confusion", "by_targets_in_view")
+        keys = (
+            "rank1",
+            "x_accuracy",
+            "z_accuracy",
+            "n",
+            "instructions",
+            "confusion",
+            "by_targets_in_view",
+            "by_kind_and_targets",
+        )
         out = {k: getattr(self, k) for k in keys}
         if self.presence is not None:
             out["presence"] = self.presence
@@ -175,11 +186,19 @@ def instructions_for(ckpt: LoadedCheckpoint, data: ImageSet, setting: str, seed:
     return pair_instructions(data.kinds, templates, seed)
 
 
-def _by_targets_in_view(result: EvalResult, data: ImageSet) -> dict[str, dict[str, float]]:
+def _rank1_by(result: EvalResult, keys: Sequence[str]) -> dict[str, dict[str, float]]:
     groups: dict[str, list[bool]] = {}
-    for pred, true, refs in zip(result.predictions, result.labels, data.targets, strict=True):
-        groups.setdefault(str(sum(t.in_view for t in refs)), []).append(pred == true)
+    for pred, true, key in zip(result.predictions, result.labels, keys, strict=True):
+        groups.setdefault(key, []).append(pred == true)
     return {k: {"n": len(v), "rank1": sum(v) / len(v)} for k, v in sorted(groups.items())}
+
+
+def _group_rank1(result: EvalResult, data: ImageSet) -> None:
+    """Fill `result`'s rank-1 by targets in view, and by named kind and targets in view."""
+    in_view = [str(sum(t.in_view for t in refs)) for refs in data.targets]
+    result.by_targets_in_view = _rank1_by(result, in_view)
+    kinds = [f"{kind}/{k}" for kind, k in zip(data.kinds, in_view, strict=True)]
+    result.by_kind_and_targets = _rank1_by(result, kinds)
 
 
 def _words(ckpt: LoadedCheckpoint, setting: str) -> tuple[list[str], str]:
@@ -293,7 +312,7 @@ def evaluate_checkpoint_modes(
     results = []
     for mirror in mirror_modes:
         result = score(dist + mirrored if mirror else dist, data, setting + ("+mirror" if mirror else ""))
-        result.by_targets_in_view = _by_targets_in_view(result, data)
+        _group_rank1(result, data)
         result.presence = presence
         log.info("%s on %s/%s (%d images): rank-1 %.4f", model_dir, data_dir, split, result.n, result.rank1)
         results.append(result)

@@ -4,8 +4,9 @@ Per seed, train the `grounded` preset on the training folders together (as the s
 is trained) and evaluate it on every test folder with held-out phrasings and synonyms: rank-1,
 rank-1 by targets in view, and the "not in view" AUROC. The report gives each figure's mean and
 spread over seeds, since one seed's figure moves by a few points, and the held-out look's gap to
-in-distribution images with the same number of targets in view (the `--heldout-look` folder against
-the test folders without twins; twins are a harder family of their own, so they would flatter the gap).
+in-distribution images with the same number of targets in view, and with the same named kind as well
+(the `--heldout-look` folder against the test folders without twins; twins are a harder family of
+their own, so they would flatter the gap).
 
 A seed whose folder already holds `eval.json` is reused; one whose folder holds a finished training
 run (`metrics.json` beside the checkpoint) is evaluated without retraining, so an interrupted
@@ -32,6 +33,13 @@ LOOK = "heldout-look"
 MODES = (("tests", "look_gap", False), ("tests_mirror", "look_gap_mirror", True))
 """Each test set is scored as the image alone and with its mirror image (`evaluate --mirror-tta`, what
 the planner does where its checkpoint asks for it)."""
+STRATA = (
+    ("by_targets_in_view", "", "the same number of targets in view"),
+    ("by_kind_and_targets", "_kind", "the same named kind and the same number of targets in view"),
+)
+"""How the held-out look is matched to in-distribution images: (the evaluation's grouping, the suffix
+of its gap key in the summary, words for the report). Matching on the named kind as well keeps a
+test set's draw of kinds (switch boxes are the hardest kind everywhere) out of the look's gap."""
 
 
 @dataclass(frozen=True)
@@ -96,6 +104,7 @@ def run_grounded_job(job: GroundedJob) -> dict[str, Any]:
                 "rank1": ev.rank1,
                 "n": ev.n,
                 "by_targets_in_view": ev.by_targets_in_view,
+                "by_kind_and_targets": ev.by_kind_and_targets,
                 "auroc": None if ev.presence is None else ev.presence.get("auroc"),
                 "twins": twins,
             }
@@ -108,17 +117,20 @@ def _has_twins(folder: Path) -> bool:
     return bool(meta.get("protocol", {}).get("twins", False))
 
 
-def look_gap(summary: dict[str, Any], key: str = "tests") -> dict[str, float] | None:
-    """One seed's held-out look rank-1 against the no-twins test sets' rank-1 at the same targets in view,
-    weighted by the held-out set's own mix of targets in view; None without a held-out look."""
+def look_gap(
+    summary: dict[str, Any], key: str = "tests", by: str = "by_targets_in_view"
+) -> dict[str, float] | None:
+    """One seed's held-out look rank-1 against the no-twins test sets' rank-1 in the same group (`by`:
+    targets in view, or named kind and targets in view), weighted by the held-out set's own mix of
+    groups; None without a held-out look (or an evaluation from before that grouping existed)."""
     tests = summary[key]
     look = tests.get(LOOK)
-    if look is None:
+    if look is None or by not in look:
         return None
-    refs = [t for name, t in tests.items() if name != LOOK and not t["twins"]]
+    refs = [t for name, t in tests.items() if name != LOOK and not t["twins"] and by in t]
     reference = weight = 0.0
-    for k, cell in look["by_targets_in_view"].items():
-        cells = [t["by_targets_in_view"][k] for t in refs if k in t["by_targets_in_view"]]
+    for k, cell in look[by].items():
+        cells = [t[by][k] for t in refs if k in t[by]]
         n = sum(c["n"] for c in cells)
         if n == 0:
             continue  # no in-distribution image with this many targets: not compared
@@ -127,9 +139,7 @@ def look_gap(summary: dict[str, Any], key: str = "tests") -> dict[str, float] | 
     if weight == 0:
         return None
     matched_look = sum(
-        cell["rank1"] * cell["n"]
-        for k, cell in look["by_targets_in_view"].items()
-        if any(k in t["by_targets_in_view"] for t in refs)
+        cell["rank1"] * cell["n"] for k, cell in look[by].items() if any(k in t[by] for t in refs)
     )
     return {"heldout": matched_look / weight, "in_distribution": reference / weight}
 
@@ -198,13 +208,14 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
                 "rank1": _spread([c["rank1"] for c in cells]),
                 "auroc": _spread(aurocs) if aurocs else None,
             }
-        gaps = [g for g in (look_gap(r, key) for r in results) if g is not None]
-        if gaps:
-            table[gap_key] = {
-                "heldout": _spread([g["heldout"] for g in gaps]),
-                "in_distribution": _spread([g["in_distribution"] for g in gaps]),
-                "gap_points": _spread([100 * (g["in_distribution"] - g["heldout"]) for g in gaps]),
-            }
+        for by, suffix, _ in STRATA:
+            gaps = [g for g in (look_gap(r, key, by) for r in results) if g is not None]
+            if gaps:
+                table[gap_key + suffix] = {
+                    "heldout": _spread([g["heldout"] for g in gaps]),
+                    "in_distribution": _spread([g["in_distribution"] for g in gaps]),
+                    "gap_points": _spread([100 * (g["in_distribution"] - g["heldout"]) for g in gaps]),
+                }
     table["train_seconds"] = _spread([r["train_seconds"] for r in results])
     return table
 
@@ -246,18 +257,19 @@ def render_report(
             lines.append(
                 f"| {name} (`{folder}`) | {cell['n']} | {_pct(cell['rank1'])} | {auroc} | {per_seed} |"
             )
-        gap = table.get(gap_key)
-        if gap:
-            lines += [
-                "",
-                "Held-out look against in-distribution test images (no twins) with the same number of",
-                "targets in view, weighted by the held-out set's mix:",
-                "",
-                f"- held-out look: {_pct(gap['heldout'])}",
-                f"- in distribution: {_pct(gap['in_distribution'])}",
-                f"- gap: {gap['gap_points']['mean']:.2f} points ± {gap['gap_points']['sd']:.2f} "
-                f"({gap['gap_points']['min']:.2f} to {gap['gap_points']['max']:.2f})",
-            ]
+        for _, suffix, words in STRATA:
+            gap = table.get(gap_key + suffix)
+            if gap:
+                lines += [
+                    "",
+                    f"Held-out look against in-distribution test images (no twins) with {words}, "
+                    "weighted by the held-out set's mix:",
+                    "",
+                    f"- held-out look: {_pct(gap['heldout'])}",
+                    f"- in distribution: {_pct(gap['in_distribution'])}",
+                    f"- gap: {gap['gap_points']['mean']:.2f} points ± {gap['gap_points']['sd']:.2f} "
+                    f"({gap['gap_points']['min']:.2f} to {gap['gap_points']['max']:.2f})",
+                ]
     t = table["train_seconds"]
     lines += ["", f"Training: {t['mean']:.0f} s per seed on average ({t['min']:.0f}–{t['max']:.0f} s).", ""]
     return "\n".join(lines)
