@@ -173,6 +173,23 @@ def test_channels_last_is_the_same_model_in_another_memory_order(synthetic: Path
     load_checkpoint(tmp_path / "fast")  # the probe check inside recomputes the stored distances
 
 
+def test_ema_saves_the_moving_average_of_the_weights(synthetic: Path, tmp_path: Path) -> None:
+    """With a decay near 0 the average is the latest weights (the plain run's); with 0.9 it lags behind
+    them; either way the saved checkpoint loads and passes its probe. The training draws are the same."""
+    from controller.planning.latent.checkpoint import load_checkpoint
+
+    plain = _one_epoch(synthetic, tmp_path / "plain")
+    latest = _one_epoch(synthetic, tmp_path / "latest", ema_decay=1e-9)
+    lagging = _one_epoch(synthetic, tmp_path / "lagging", ema_decay=0.9)
+    for key, value in plain.items():
+        torch.testing.assert_close(latest[key], value, atol=1e-6, rtol=1e-5, msg=key)
+    moved = [k for k, v in plain.items() if v.is_floating_point() and not torch.allclose(lagging[k], v)]
+    assert len(moved) > len(plain) // 2, moved
+    load_checkpoint(tmp_path / "lagging")
+    with pytest.raises(ValueError, match="ema_decay"):
+        TrainConfig(ema_decay=1.0)
+
+
 def test_an_unknown_or_missing_training_device_is_a_clear_error(synthetic: Path, tmp_path: Path) -> None:
     from controller.planning.latent.train import resolve_device
 

@@ -90,6 +90,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--channels-last", choices=("on", "off"), default=None, help="channels-last memory order (speed)"
     )
     p.add_argument(
+        "--ema",
+        type=float,
+        default=None,
+        metavar="DECAY",
+        help="save a moving average of the weights (0 = off)",
+    )
+    p.add_argument(
         "--device",
         default="cpu",
         help="where the model trains: cpu (default), cuda, cuda:N, or auto (a GPU if torch sees one)",
@@ -120,6 +127,7 @@ def main(argv: list[str]) -> int:
         batch_size=args.batch_size,
         named_fraction=args.named_fraction,
         channels_last=on[args.channels_last],
+        ema_decay=args.ema,
         balance_kinds=on[args.balance_kinds],
         epsilon_px=args.epsilon_px,
     )

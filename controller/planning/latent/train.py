@@ -179,6 +179,14 @@ def train(
         if cfg.lr_schedule == "cosine"
         else (lambda s: 1.0),
     )
+    # The model that is validated and saved: the trained weights, or their moving average.
+    ema = (
+        torch.optim.swa_utils.AveragedModel(
+            model, multi_avg_fn=torch.optim.swa_utils.get_ema_multi_avg_fn(cfg.ema_decay), use_buffers=True
+        )
+        if cfg.ema_decay > 0
+        else None
+    )
     size_px = (index.width_px, index.height_px)
     meta: dict[str, Any] = {
         "train": cfg.to_dict(),
@@ -210,14 +218,17 @@ def train(
             terms.total.backward()
             optimiser.step()
             schedule.step()
+            if ema is not None:
+                ema.update_parameters(model)
             for k, v in terms.as_floats().items():
                 sums[k] += v * len(idx)
             correct += int((d_all.detach().argmin(dim=1) == labels).sum())
             n_scored += len(labels)
             seen += len(idx) + cfg.goal_sample
-        goal = goal_embedding(model, goals.images, goal_ids)
+        kept = model if ema is None else ema.module
+        goal = goal_embedding(kept, goals.images, goal_ids)
         val = score(
-            predict_distances(model, tokenizer, goal, val_set.images, val_instructions), val_set, "train"
+            predict_distances(kept, tokenizer, goal, val_set.images, val_instructions), val_set, "train"
         )
         row = {k: v / len(train_set) for k, v in sums.items()}
         row.update(epoch=epoch, train_accuracy=correct / max(1, n_scored), val_accuracy=val.rank1)
@@ -231,7 +242,7 @@ def train(
                 "val_x": val.x_accuracy,
                 "val_z": val.z_accuracy,
             }
-            on_cpu = model if dev.type == "cpu" else copy.deepcopy(model).cpu()
+            on_cpu = kept if dev.type == "cpu" else copy.deepcopy(kept).cpu()
             save_checkpoint(out_dir, on_cpu, tokenizer, goal, meta)
         bar.set_postfix(
             loss=f"{row['total']:.3f}", train=f"{row['train_accuracy']:.3f}", val=f"{val.rank1:.3f}"
