@@ -39,8 +39,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--mirror-tta",
         action="store_true",
-        help="score each image with its left-right mirror image too (test-time augmentation; "
-        "evaluation only, the planner does not do it)",
+        help="score each image with its left-right mirror image too (test-time augmentation, as the "
+        "planner does where its checkpoint's config.json says planner.mirror_tta)",
     )
     p.add_argument("--json", type=Path, default=None, help="also write the full result as JSON here")
     return p

@@ -54,9 +54,9 @@ class BenchmarkConfig:
     detector_checkpoint: str | None = None
     """The image detector's run folder; None: its shipped weights."""
     scale_moves: bool = True
+    """The loop's move scheme: scaled with the detector's offset (default) or the paper's fixed lengths."""
     second_choices: int | None = None
     """The loop's `max_second_choices` (None: its default; 0: a "no move" far from centre is a stall)."""
-    """The loop's move scheme: scaled with the detector's offset (default) or the paper's fixed lengths."""
     targets: int = 1
     """Targets in every scene, the named one included (1..4)."""
     twins: bool = False

@@ -99,7 +99,7 @@ def goal_embedding(
     model.eval()
     if model.conditioned and goal_ids is None:
         raise ValueError("a FiLM-conditioned model needs each goal image's instruction (goal_ids)")
-    dev = _device_of(model)
+    dev = model.device
     parts = []
     for i in range(0, len(goal_images_u8), batch):
         text = model.encode_text(goal_ids[i : i + batch].to(dev)) if goal_ids is not None else None
@@ -118,18 +118,13 @@ def predict_distances(
 ) -> torch.Tensor:
     """(N, 9) distances D(ẑ'_a, z*) for N images, each with its own instruction."""
     model.eval()
-    dev = _device_of(model)
+    dev = model.device
     goal = goal.to(dev)
     out = []
     for i in range(0, len(images_u8), batch):
         ids = tokenizer.batch(instructions[i : i + batch]).to(dev)
         out.append(model(to_float(images_u8[i : i + batch].to(dev)), ids, goal).cpu())
     return torch.cat(out)
-
-
-def _device_of(model: torch.nn.Module) -> torch.device:
-    """Where the model's weights live (training may run on a GPU; results come back to the CPU)."""
-    return next(model.parameters()).device
 
 
 def score(distances: torch.Tensor, data: ImageSet, setting: str) -> EvalResult:
@@ -252,7 +247,8 @@ def evaluate_loaded(
     """Rank-1 of `ckpt` on `data`; `instructions` (one per image) default to `instructions_for(setting)`.
 
     `mirror_tta`: score each image as the sum of its own distances and its left-right mirror image's,
-    the mirror's actions swapped back (test-time augmentation; evaluation only, the planner does not).
+    the mirror's actions swapped back (test-time augmentation; the planner does the same where its
+    checkpoint's `planner.mirror_tta` says so).
     """
     if instructions is None:
         instructions = instructions_for(ckpt, data, setting, seed)

@@ -81,6 +81,11 @@ class LatentDynamicsModel(nn.Module):
 
     # --- encoders -----------------------------------------------------------------------------
     @property
+    def device(self) -> torch.device:
+        """Where the weights live (training may run on a GPU; data and results stay on the CPU)."""
+        return next(self.parameters()).device
+
+    @property
     def conditioned(self) -> bool:
         """Whether E_img takes the instruction (FiLM), so an image embedding depends on the words."""
         return self.config.conditioning == "film"

@@ -54,7 +54,7 @@ def ranking_terms(
 def model_input(model: LatentDynamicsModel, images: torch.Tensor, channels_last: bool) -> torch.Tensor:
     """A CPU-augmented batch on the model's device, in the memory order training uses."""
     fmt = torch.channels_last if channels_last else torch.contiguous_format
-    return images.to(next(model.parameters()).device, memory_format=fmt)
+    return images.to(model.device, memory_format=fmt)
 
 
 def goal_ids(tokenizer: InstructionTokenizer, goals: ImageSet, corpus: str) -> torch.Tensor:
