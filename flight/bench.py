@@ -24,7 +24,6 @@ skipped then.
 from __future__ import annotations
 
 import logging
-import re
 import time
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
@@ -44,7 +43,7 @@ from flight.safety import flight_guard
 from flight.scenario import MoveFlight, fly_move
 from flight.sim_launcher import SimulatorProcess
 from flight.types import VelocityBody
-from flight.urls import validate_connection_url
+from flight.urls import udpin_address
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.serve import READY_PREFIX, SimVehicleRun, run_to_json
@@ -92,7 +91,7 @@ def _armed_flight(config: FlightBenchConfig) -> Iterator[_BenchFlight]:
                 _sim_vehicle(base, config.boot_delay_s, Path(stack.enter_context(TemporaryDirectory())))
             )
             relay = stack.enter_context(MavlinkRelay(listen_port=base + 1, client_port=base + 2))
-        elif (listen := _udpin_address(config.vehicle_url)) is not None:
+        elif (listen := udpin_address(config.vehicle_url)) is not None:
             relay = stack.enter_context(
                 MavlinkRelay(listen_port=listen[1], client_port=base + 2, listen_host=listen[0])
             )
@@ -116,6 +115,7 @@ def _armed_flight(config: FlightBenchConfig) -> Iterator[_BenchFlight]:
 def _sim_vehicle(port: int, boot_delay_s: float, folder: Path) -> SimulatorProcess:
     """A sim-vehicle (no video) binding `port` and sending to `port + 1`, through the one launcher."""
     vehicle = SimVehicleConfig(
+        adopt_client=False,
         local_port=port,
         remote_port=port + 1,
         video=False,
@@ -123,13 +123,6 @@ def _sim_vehicle(port: int, boot_delay_s: float, folder: Path) -> SimulatorProce
     )
     run = SimVehicleRun(vehicle=vehicle)
     return SimulatorProcess("sim_world.vehicle", run_to_json(run), folder / "sim_vehicle.log", READY_PREFIX)
-
-
-def _udpin_address(url: str) -> tuple[str, int] | None:
-    """(host, port) of a `udpin://HOST:PORT` URL, else None."""
-    validate_connection_url(url)
-    match = re.fullmatch(r"udpin://([0-9.]+):(\d+)", url.strip())
-    return None if match is None else (match.group(1), int(match.group(2)))
 
 
 def _mavsdk_bench(config: FlightBenchConfig) -> dict[str, Any]:

@@ -15,14 +15,26 @@ the vehicle's address), it can:
   vehicle sees them) and **cut** the uplink (`drop_uplink`: the controller's stream
   stops, telemetry still flows): the flight benchmark and the backend tests use these.
 
-The vehicle's address is learned from the first datagram that holds real MAVLink (a
-frame of a known id, so CRC-checked): a sender of garbage never becomes "the vehicle".
+The relay knows its vehicle: it locks onto the address of the first datagram that holds an
+autopilot's HEARTBEAT (CRC-checked; of `vehicle_system_id` when the run knows the id, as it does
+for every vehicle it starts) and from then on forwards only that address's datagrams; every
+other sender on the vehicle side is dropped and counted (`foreign_datagrams`), so a stranger can
+neither feed the client telemetry nor receive its commands. On the client side only the client's
+own port (`client_port` on loopback, where MAVSDK listens and sends from) is heard.
+
+Recording never costs the link: a .tlog write that fails (a full disk, a removed folder) stops the
+recording, says so once (`recording_error`), cuts the file back to its last whole message and
+renames it `*.incomplete.tlog`, and the relay goes on relaying. A send that fails is counted and
+dropped; nothing but `close()` ends the relay.
 Only UDP links can be relayed; a serial link's log is not recorded.
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import logging
+import os
 import selectors
 import socket
 import struct
@@ -40,6 +52,8 @@ from flight.link_faults import FaultyDelivery, LinkFaults
 log = logging.getLogger(__name__)
 
 SET_POSITION_TARGET_LOCAL_NED = 84
+INCOMPLETE_SUFFIX = ".incomplete.tlog"
+"""What a .tlog whose recording stopped early is renamed to end with (`flight.incomplete.tlog`)."""
 _MAX_DATAGRAM = 65535
 _POLL_S = 0.05
 
@@ -55,8 +69,26 @@ def parse_datagram(data: bytes) -> list[mavlink.MAVLink_message]:
     return [m for m in messages if not isinstance(m, (mavlink.MAVLink_bad_data, mavlink.MAVLink_unknown))]
 
 
+def vehicle_heartbeat_from(messages: list[mavlink.MAVLink_message], system_id: int | None) -> int | None:
+    """The system id of an autopilot's HEARTBEAT among `messages` (of `system_id`, when given), else None.
+
+    A ground station's or a peripheral's heartbeat (type GCS, autopilot INVALID) never counts."""
+    for message in messages:
+        if message.get_msgId() != mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+            continue
+        if message.type == mavlink.MAV_TYPE_GCS or message.autopilot == mavlink.MAV_AUTOPILOT_INVALID:
+            continue
+        if system_id is None or message.get_srcSystem() == system_id:
+            return message.get_srcSystem()
+    return None
+
+
 class MavlinkRelay:
-    """Relay `vehicle → listen_port → client_port` and back; bound and running once constructed."""
+    """Relay `vehicle → listen_port → client_port` and back; bound and running once constructed.
+
+    `listen_host`: the address to listen on for the vehicle (the host its URL names; loopback by
+    default). `vehicle_system_id`: lock onto this system's heartbeat only (None: the first autopilot).
+    """
 
     def __init__(
         self,
@@ -65,6 +97,7 @@ class MavlinkRelay:
         tlog_path: str | Path | None = None,
         listen_host: str = "127.0.0.1",
         faults: LinkFaults | None = None,
+        vehicle_system_id: int | None = None,
     ) -> None:
         self.listen_port = listen_port
         self.client_port = client_port
@@ -73,10 +106,17 @@ class MavlinkRelay:
         self.drop_uplink = False
         self.uplink_counts: Counter[int] = Counter()
         self.messages_logged = 0
+        self.vehicle_system_id = vehicle_system_id
         self.vehicle_address: tuple[str, int] | None = None
+        self.foreign_datagrams = 0
+        """Datagrams dropped because they came from neither the vehicle nor the client."""
+        self.send_errors = 0
+        self.recording_error: str | None = None
+        """Why the .tlog stopped early (None while it records, or when it finished whole)."""
         self.faults = FaultyDelivery(faults) if faults is not None and faults.active else None
         """A bad link on purpose: every datagram, both ways, goes through it."""
         self._uplink_times: dict[int, list[float]] = {}
+        self._strangers_seen: set[tuple[str, int]] = set()
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._vehicle_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -89,13 +129,20 @@ class MavlinkRelay:
         self._client_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._client_sock.bind((self.client_host, 0))
         self._file: BinaryIO | None = None
+        self._logged_bytes = 0
         if self.path is not None:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._file = self.path.open("wb")
+            try:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                self._file = self.path.open("xb", buffering=0)  # never over an earlier log
+            except OSError as exc:
+                self._vehicle_sock.close()
+                self._client_sock.close()
+                raise OSError(f"MAVLink relay: cannot start the log {self.path}: {exc}") from exc
         self._thread = threading.Thread(target=self._run, name="mavlink-relay", daemon=True)
         self._thread.start()
         log.info(
-            "MAVLink relay: udp %d <-> %d%s",
+            "MAVLink relay: udp %s:%d <-> %d%s",
+            listen_host,
             listen_port,
             client_port,
             f", log {self.path}" if self.path else "",
@@ -116,24 +163,37 @@ class MavlinkRelay:
                 timeout = _POLL_S
                 if self.faults is not None and (at := self.faults.next_due_s()) is not None:
                     timeout = min(timeout, max(0.0, at - time.monotonic()))
-                for key, _ in selector.select(timeout):
+                try:
+                    ready = selector.select(timeout)
+                except OSError as exc:  # the sockets were closed under us: close() is under way
+                    if not self._stop.is_set():
+                        log.error("MAVLink relay: select failed: %s", exc)
+                    return
+                for key, _ in ready:
                     self._receive(key.data)
                 if self.faults is not None:
                     for side, data in self.faults.due(time.monotonic()):
                         self._send(side, data)
-        except OSError as exc:
-            if not self._stop.is_set():
-                log.error("MAVLink relay stopped: %s", exc)
         finally:
             selector.close()
 
     def _receive(self, side: str) -> None:
         sock = self._vehicle_sock if side == "vehicle" else self._client_sock
-        data, address = sock.recvfrom(_MAX_DATAGRAM)
-        if side == "vehicle" and self.vehicle_address != address:
-            if not parse_datagram(data):
-                return  # not MAVLink: never let it become the vehicle's address
-            self.vehicle_address = address
+        try:
+            data, address = sock.recvfrom(_MAX_DATAGRAM)
+        except OSError:  # an ICMP error from an earlier send, or a socket being closed
+            return
+        known = self.vehicle_address is not None
+        if (
+            side == "vehicle"
+            and address != self.vehicle_address
+            and (known or not self._identify_vehicle(data, address))
+        ):
+            self._stranger(address)
+            return
+        if side == "client" and address != (self.client_host, self.client_port):
+            self._stranger(address)
+            return
         if side == "client" and self.drop_uplink:
             return
         if self.faults is not None:
@@ -141,15 +201,44 @@ class MavlinkRelay:
         else:
             self._send(side, data)
 
+    def _identify_vehicle(self, data: bytes, address: tuple[str, int]) -> bool:
+        """Lock onto `address` if `data` holds the vehicle's heartbeat; True if it did."""
+        system_id = vehicle_heartbeat_from(parse_datagram(data), self.vehicle_system_id)
+        if system_id is None:
+            return False
+        self.vehicle_address, self.vehicle_system_id = address, system_id
+        log.info("MAVLink relay: vehicle is system %d at %s:%d", system_id, *address)
+        return True
+
+    def _stranger(self, address: tuple[str, int]) -> None:
+        self.foreign_datagrams += 1
+        if address not in self._strangers_seen and len(self._strangers_seen) < 64:
+            self._strangers_seen.add(address)
+            log.warning(
+                "MAVLink relay: ignoring datagrams from %s:%d (not this link's vehicle or client)", *address
+            )
+
     def _send(self, side: str, data: bytes) -> None:
-        """Forward one datagram; meter and log what crossed."""
+        """Forward one datagram; meter and log what crossed. A failed send is counted, never raised."""
+        try:
+            if side == "vehicle":
+                self._client_sock.sendto(data, (self.client_host, self.client_port))
+            elif self.vehicle_address is not None:
+                self._vehicle_sock.sendto(data, self.vehicle_address)
+            else:
+                return  # nothing heard from the vehicle yet: nowhere to send
+        except OSError as exc:
+            self.send_errors += 1
+            if self.send_errors == 1:
+                log.warning(
+                    "MAVLink relay: a %s-bound send failed: %s",
+                    "client" if side == "vehicle" else "vehicle",
+                    exc,
+                )
+            return
         if side == "vehicle":
-            self._client_sock.sendto(data, (self.client_host, self.client_port))
             messages = parse_datagram(data) if self._file is not None else []
         else:
-            if self.vehicle_address is None:
-                return  # nothing heard from the vehicle yet: nowhere to send
-            self._vehicle_sock.sendto(data, self.vehicle_address)
             messages = parse_datagram(data)
             now = time.monotonic()
             with self._lock:
@@ -157,11 +246,44 @@ class MavlinkRelay:
                     msg_id = message.get_msgId()
                     self.uplink_counts[msg_id] += 1
                     self._uplink_times.setdefault(msg_id, []).append(now)
-        if self._file is not None:
-            stamp = struct.pack(">Q", int(time.time() * 1e6))
+        if self._file is not None and messages:
+            self._record(messages)
+
+    def _record(self, messages: list[mavlink.MAVLink_message]) -> None:
+        """Append `messages` to the .tlog; on a failed write, stop recording (once) and keep relaying."""
+        assert self._file is not None
+        stamp = struct.pack(">Q", int(time.time() * 1e6))
+        try:
             for message in messages:
-                self._file.write(stamp + bytes(message.get_msgbuf()))
+                record = stamp + bytes(message.get_msgbuf())
+                written = self._file.write(record)
+                if written != len(record):
+                    short = f"{os.strerror(errno.ENOSPC)} ({written} of {len(record)} bytes written)"
+                    raise OSError(errno.ENOSPC, short)
+                self._logged_bytes += len(record)
                 self.messages_logged += 1
+        except OSError as exc:
+            self._stop_recording(exc)
+
+    def _stop_recording(self, exc: OSError) -> None:
+        """Cut the log back to its last whole message, close it, and name it incomplete."""
+        file, self._file = self._file, None
+        self.recording_error = f"the .tlog stopped after {self.messages_logged} messages: {exc}"
+        log.error("MAVLink relay: %s; the flight goes on without it", self.recording_error)
+        if file is None or self.path is None:
+            return
+        with contextlib.suppress(OSError):
+            file.truncate(self._logged_bytes)
+        with contextlib.suppress(OSError):
+            file.close()
+        incomplete = self.path.with_name(self.path.stem + INCOMPLETE_SUFFIX)
+        try:
+            os.replace(self.path, incomplete)
+            self.path = incomplete
+        except OSError as rename_error:
+            log.error(
+                "MAVLink relay: could not rename %s to %s: %s", self.path, incomplete.name, rename_error
+            )
 
     # ----------------------------------------------------------------- lifecycle
     def close(self) -> None:
@@ -172,8 +294,11 @@ class MavlinkRelay:
         for sock in (self._vehicle_sock, self._client_sock):
             sock.close()
         if self._file is not None:
-            self._file.close()
-            self._file = None
+            try:
+                self._file.close()
+                self._file = None
+            except OSError as exc:  # the last bytes could not reach the disk
+                self._stop_recording(exc)
 
     def __enter__(self) -> MavlinkRelay:
         return self

@@ -3,8 +3,13 @@
 The child runs in its own session, so a Ctrl-C in the terminal reaches only the
 controller (which lands first and then stops the child); it watches its parent and
 stops by itself within a second when the parent dies, however the parent dies. It
-prints one line `<prefix>{json}` when it is ready; `start()` waits for that line (or
-for the child's exit, reported with the end of its log) and `ready` holds the JSON.
+reads its config from a pipe (`--config -`) and prints one line `<prefix>{json}` when it
+is ready; `start()` waits for that line (or for the child's exit, reported with the end
+of its output) and `ready` holds the JSON.
+
+The child's output comes through a pipe that a reader thread drains all the time and
+copies into `log_path` as a record: a log that cannot be written (a full disk, a removed
+folder) is said once and no longer copied, and never stalls the child or its start.
 `close()` sends SIGTERM (the child stops its own children and writes its logs), then
 SIGKILL to the whole process group if it hangs.
 
@@ -20,12 +25,16 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
+from collections import deque
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
 log = logging.getLogger(__name__)
+
+_TAIL_LINES = 200
 
 
 class SimulatorStartError(RuntimeError):
@@ -48,21 +57,33 @@ class SimulatorProcess:
         self.ready_prefix, self.start_timeout_s, self.name = ready_prefix, start_timeout_s, name
         self.config_path = self.log_path.with_suffix(".json")
         self.ready: dict[str, Any] = {}
+        self.log_error: str | None = None
+        """Why the log stopped being copied to `log_path` (None while it is)."""
         self._process: subprocess.Popen[bytes] | None = None
+        self._tail: deque[str] = deque(maxlen=_TAIL_LINES)
+        self._ready_line = threading.Event()
+        self._reader: threading.Thread | None = None
 
     def start(self) -> SimulatorProcess:
-        self.log_path.parent.mkdir(parents=True, exist_ok=True)
-        self.config_path.write_text(json.dumps(self.config, indent=2))
-        command = [sys.executable, "-m", self.module, "--config", str(self.config_path)]
-        with self.log_path.open("wb") as log_file:
-            self._process = subprocess.Popen(
-                command,
-                stdin=subprocess.DEVNULL,
-                stdout=log_file,
-                stderr=subprocess.STDOUT,
-                start_new_session=True,
-            )
+        try:  # a copy for people; the child reads its config from the pipe
+            self.log_path.parent.mkdir(parents=True, exist_ok=True)
+            self.config_path.write_text(json.dumps(self.config, indent=2))
+        except OSError as exc:
+            log.warning("%s: could not keep a copy of its config in %s: %s", self.name, self.config_path, exc)
+        command = [sys.executable, "-m", self.module, "--config", "-"]
+        self._process = subprocess.Popen(
+            command,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+        self._reader = threading.Thread(target=self._read_output, name=f"{self.name}-output", daemon=True)
+        self._reader.start()
         try:
+            assert self._process.stdin is not None
+            with self._process.stdin:
+                self._process.stdin.write(json.dumps(self.config).encode())
             self._wait_ready()
         except BaseException:
             self.close()
@@ -70,31 +91,60 @@ class SimulatorProcess:
         log.info("%s ready (pid %d): %s", self.name, self._process.pid, self.ready)
         return self
 
+    def _read_output(self) -> None:
+        """Drain the child's output: keep its tail, catch the ready line, copy it to the log while it can."""
+        assert self._process is not None and self._process.stdout is not None
+        try:
+            log_file = self.log_path.open("ab")
+        except OSError as exc:
+            log_file = None
+            self._log_failed(exc)
+        for raw in self._process.stdout:
+            line = raw.decode(errors="replace").rstrip("\n")
+            self._tail.append(line)
+            if not self._ready_line.is_set() and line.startswith(self.ready_prefix):
+                with contextlib.suppress(ValueError):
+                    self.ready = json.loads(line[len(self.ready_prefix) :])
+                    self._ready_line.set()
+            if log_file is not None:
+                try:
+                    log_file.write(raw)
+                    log_file.flush()
+                except OSError as exc:
+                    with contextlib.suppress(OSError):
+                        log_file.close()
+                    log_file = None
+                    self._log_failed(exc)
+        if log_file is not None:
+            with contextlib.suppress(OSError):
+                log_file.close()
+
+    def _log_failed(self, exc: OSError) -> None:
+        self.log_error = f"{self.log_path}: {exc}"
+        log.error("%s: its log is no longer recorded (%s); it runs on", self.name, self.log_error)
+
     def _wait_ready(self) -> None:
         assert self._process is not None
         deadline = time.monotonic() + self.start_timeout_s
-        while True:
-            for line in self.output().splitlines():
-                if line.startswith(self.ready_prefix):
-                    self.ready = json.loads(line[len(self.ready_prefix) :])
-                    return
+        while not self._ready_line.wait(0.1):
             if self._process.poll() is not None:
+                if self._reader is not None:
+                    self._reader.join(2.0)  # the last lines it printed
+                if self._ready_line.is_set():
+                    break
                 raise SimulatorStartError(
                     f"{self.name} exited with {self._process.returncode} before it was ready; "
-                    f"{self.log_path} ends with:\n{self.output()[-2000:]}"
+                    f"its output ends with:\n{self.output()[-2000:]}"
                 )
             if time.monotonic() > deadline:
                 raise SimulatorStartError(
                     f"{self.name} not ready within {self.start_timeout_s:.0f} s; "
-                    f"{self.log_path} ends with:\n{self.output()[-2000:]}"
+                    f"its output ends with:\n{self.output()[-2000:]}"
                 )
-            time.sleep(0.1)
 
     def output(self) -> str:
-        try:
-            return self.log_path.read_text(errors="replace")
-        except OSError:
-            return ""
+        """The last lines the child printed (also in `log_path` while that can be written)."""
+        return "\n".join(self._tail)
 
     @property
     def pid(self) -> int | None:

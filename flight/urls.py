@@ -74,3 +74,10 @@ def _check_serial(url: str, rest: str) -> str:
             f"baud rate {baud_text!r} is not one of {sorted(_BAUD_RATES)} (radios: usually 57600)",
         )
     return url
+
+
+def udpin_address(url: str) -> tuple[str, int] | None:
+    """(host, port) of a valid `udpin://HOST:PORT` URL (where a relay in front of it listens), else None."""
+    validate_connection_url(url)
+    match = re.fullmatch(r"udpin://([0-9.]+):(\d+)", url.strip())
+    return None if match is None else (match.group(1), int(match.group(2)))

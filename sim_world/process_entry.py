@@ -71,14 +71,16 @@ def say_ready(out: TextIO, prefix: str, info: Any) -> None:
 def config_entry_point(
     argv: list[str], module: str, name: str, load: Callable[[dict[str, Any]], Any], serve: Callable[..., int]
 ) -> int:
-    """`python -m <module> --config FILE.json`: parse the config with `load`, then `serve(config, stdout,
-    watch_parent=True)`; 2 on bad usage or a bad config (named), else serve's exit code."""
+    """`python -m <module> --config FILE.json` (or `-`: the JSON on stdin, as launchers pass it): parse
+    the config with `load`, then `serve(config, stdout, watch_parent=True)`; 2 on bad usage or a bad
+    config (named), else serve's exit code."""
     if len(argv) != 2 or argv[0] != "--config":
-        print(f"usage: python -m {module} --config FILE.json", file=sys.stderr)
+        print(f"usage: python -m {module} --config FILE.json|-", file=sys.stderr)
         return 2
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
-        config = load(json.loads(Path(argv[1]).read_text()))
+        text = sys.stdin.read() if argv[1] == "-" else Path(argv[1]).read_text()
+        config = load(json.loads(text))
     except (OSError, ValueError, KeyError, TypeError) as exc:
         print(f"{name}: bad config {argv[1]}: {exc}", file=sys.stderr)
         return 2

@@ -29,7 +29,8 @@ class MavlinkTestClient:
 
     def __init__(self, listen_port: int, sysid: int = 245, compid: int = 190):
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self._sock.bind(("127.0.0.1", listen_port))
+        self._sock.bind(("127.0.0.1", listen_port))  # 0: a free port, see `port`
+        self.port: int = self._sock.getsockname()[1]
         self._sock.settimeout(0.05)
         self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
         self._parser = mavlink.MAVLink(None)

@@ -26,7 +26,7 @@ def test_fly_refuses_an_out_folder_that_holds_an_earlier_flight(tmp_path: Path) 
         cwd=REPO, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert done.returncode == 2, done.stderr
-    assert "never overwritten" in done.stderr and str(earlier) in done.stderr
+    assert "ever written over" in done.stderr and str(earlier) in done.stderr
     assert [p.name for p in earlier.iterdir()] == ["flight.tlog"]
     assert (earlier / "flight.tlog").stat().st_size == 1000
 

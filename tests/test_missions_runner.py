@@ -168,15 +168,15 @@ def test_an_epsilon_inside_the_stopping_margin_is_refused_before_the_vehicle_is_
 
 
 def test_a_report_folder_that_holds_a_flight_is_never_written_over(tmp_path: Path) -> None:
-    from controller.missions.report import ReportFolderError
     from controller.missions.runner import run_mission
+    from core.files import OutputDirError
 
     earlier = tmp_path / "earlier"
     earlier.mkdir()
     (earlier / "flight.tlog").write_bytes(b"x" * 80_000)
     (earlier / "report.json").write_text('{"status": "finished"}')
     mission = parse_mission({"name": "again", "planner": "classic"})
-    with pytest.raises(ReportFolderError, match="never overwritten"):
+    with pytest.raises(OutputDirError, match="ever written over"):
         run_mission(mission, earlier)
     assert (earlier / "flight.tlog").stat().st_size == 80_000
     assert read_report(earlier) == {"status": "finished"}

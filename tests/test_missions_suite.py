@@ -10,7 +10,6 @@ import pytest
 from controller.missions.suite import SuiteOptions, format_table, run_suite, write_junit
 
 REGRESSION = Path(__file__).resolve().parents[1] / "missions" / "regression"
-UDP_BASE, HTTP_BASE = 14800, 18800  # this file's share of the issue's port ranges (one slot: 14800-14803)
 
 
 def write_mission(folder: Path, name: str, right_m: float, expect_steps: int) -> None:
@@ -45,7 +44,7 @@ def test_suite_runs_a_folder_writes_junit_and_reports_a_failure(tmp_path: Path) 
 @pytest.mark.timeout(240)
 def test_regression_suite_in_process_passes(tmp_path: Path) -> None:
     """Every in-process mission of the shipped suite, with the shipped detector and latent planner."""
-    options = SuiteOptions(report_dir=tmp_path, exclude_tags=("hil",), udp_port_base=UDP_BASE)
+    options = SuiteOptions(report_dir=tmp_path, exclude_tags=("hil",))
     suite = run_suite(REGRESSION, options)
     assert len(suite.results) >= 19
     assert suite.passed, format_table(suite)
@@ -55,9 +54,7 @@ def test_regression_suite_in_process_passes(tmp_path: Path) -> None:
 @pytest.mark.timeout(240)  # the sim-vehicle boot and every MAVSDK wait have their own timeouts inside
 def test_regression_suite_hil_mission_passes(tmp_path: Path) -> None:
     """The hardware-in-the-loop mission: sim-vehicle subprocess, MAVSDK over UDP, MJPEG stream, .tlog."""
-    options = SuiteOptions(
-        report_dir=tmp_path, tags=("hil",), udp_port_base=UDP_BASE, http_port_base=HTTP_BASE
-    )
+    options = SuiteOptions(report_dir=tmp_path, tags=("hil",))
     suite = run_suite(REGRESSION, options)
     assert len(suite.results) == 1
     assert suite.passed, format_table(suite)

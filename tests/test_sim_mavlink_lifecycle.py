@@ -2,7 +2,8 @@
 
 `dronectl fly --vehicle sim-mavlink` starts the sim-vehicle as a child in its own session.
 Whatever ends the controller, that session must be gone shortly after, and a vehicle
-left over from elsewhere must never be flown. Ports 14940-14942 / 18940 (this file's).
+left over from elsewhere must never be flown. The missions take free ports per run; the leftover test
+fixes 14940-14942 / 18940 (this file's) so that a leftover can hold one.
 """
 
 from __future__ import annotations
@@ -26,16 +27,16 @@ PORT, HTTP = 14940, 18940
 pytestmark = pytest.mark.slow
 
 
-def _mission_file(tmp_path: Path) -> Path:
-    text = MISSION.read_text() + f"ports: {{mavlink_udp: {PORT}, http: {HTTP}}}\n"
+def _mission_file(tmp_path: Path, fixed_ports: bool = False) -> Path:
+    text = MISSION.read_text() + (f"ports: {{mavlink_udp: {PORT}, http: {HTTP}}}\n" if fixed_ports else "")
     path = tmp_path / "mission.yaml"
     path.write_text(text)
     return path
 
 
-def _fly(tmp_path: Path, out: Path) -> subprocess.Popen[str]:
-    command = [sys.executable, "-m", "tools.dronectl", "fly", "--mission", str(_mission_file(tmp_path)),
-               "--out", str(out)]  # fmt: skip
+def _fly(tmp_path: Path, out: Path, fixed_ports: bool = False) -> subprocess.Popen[str]:
+    mission = _mission_file(tmp_path, fixed_ports)
+    command = [sys.executable, "-m", "tools.dronectl", "fly", "--mission", str(mission), "--out", str(out)]
     return subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
@@ -82,7 +83,7 @@ def test_a_leftover_vehicle_on_the_ports_is_never_flown(tmp_path: Path) -> None:
     leftover = SimVehicleOptions(local_port=PORT, remote_port=PORT + 1, boot_delay_s=0.0)
     with SimVehicleProcess(leftover) as old:
         out = tmp_path / "run"
-        process = _fly(tmp_path, out)
+        process = _fly(tmp_path, out, fixed_ports=True)
         output = process.communicate(timeout=120)[0]
         assert process.returncode == 1, output
         report = json.loads((out / "report.json").read_text())

@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import Any
 
 from controller.missions.benchmark import BenchmarkConfig, format_summary, run_benchmark
-from controller.missions.report import ReportFolderError
 from controller.missions.schema import FaultSpec
+from core.files import OutputDirError
 from core.parallel import RayUnavailableError, add_ray_option
 from core.sim_speed import parse_sim_speed
 from sim_world.px4_bridge.px4_process import Px4FolderError, find_px4_dir
@@ -189,7 +189,7 @@ def main(argv: list[str]) -> int:
         parser.error(str(exc))
     try:
         summary = run_benchmark(config, report_dir=args.report)
-    except ReportFolderError as exc:
+    except OutputDirError as exc:
         print(f"dronectl benchmark-missions: --report {exc}", file=sys.stderr)
         return 2
     except RayUnavailableError as exc:

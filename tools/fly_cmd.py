@@ -34,6 +34,7 @@ from controller.missions.schema import (
     Px4Spec,
     load_mission,
 )
+from core.files import OutputDirError
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "default.yaml"
 
@@ -93,10 +94,13 @@ def summary_lines(result: MissionResult) -> list[str]:
     if result.overhead_ms_mean is not None:
         lines.append(f"      loop overhead: {result.overhead_ms_mean:.1f} ms per step (besides the move)")
     lines += [f"      - {failure}" for failure in result.failures]
-    if result.report_dir:
+    lines += [f"      not recorded: {error}" for error in result.recording_errors]
+    if result.report_dir and result.report_written:
         extra = [name for key, name in result.files.items() if name and key != "report"]
         also = f" (+ {', '.join(extra)})" if extra else ""
         lines.append(f"      report: {Path(result.report_dir) / 'report.json'}{also}")
+    elif result.report_dir:
+        lines.append(f"      report: could not be written in {result.report_dir} (the outcome is above)")
     return lines
 
 
@@ -147,7 +151,7 @@ def main(argv: list[str]) -> int:
     except (MissionFileError, ValueError) as exc:
         print(f"dronectl fly: {exc}", file=sys.stderr)
         return 2
-    from controller.missions.report import ReportFolderError, claim_report_dir, fresh_report_dir
+    from controller.missions.report import claim_report_dir, fresh_report_dir
     from controller.missions.runner import run_mission
 
     if args.rerun is not None:
@@ -161,12 +165,12 @@ def main(argv: list[str]) -> int:
     default_out = Path("runs") / "fly" / f"{mission.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     try:
         out = claim_report_dir(args.out or fresh_report_dir(default_out))
-    except ReportFolderError as exc:
+    except OutputDirError as exc:
         print(f"dronectl fly: --out {exc}", file=sys.stderr)
         return 2
     print(f"flying {mission.name} ({mission.vehicle}, planner {mission.planner}) ...", flush=True)
     try:
-        result = run_mission(mission, out, rerun_path=args.rerun)
+        result = run_mission(mission, out, rerun_path=args.rerun, claimed=True)
     except Exception as exc:  # could not start: a clear line, not a traceback
         print(f"dronectl fly: {mission.name} could not start: {type(exc).__name__}: {exc}", file=sys.stderr)
         print(f"      report: {out / 'report.json'} (why it did not start)", file=sys.stderr)

@@ -13,9 +13,10 @@ import sys
 import time
 from pathlib import Path
 
-from controller.missions.report import ReportFolderError, fresh_report_dir
+from controller.missions.report import fresh_report_dir
 from controller.missions.schema import PLANNER_NAMES, MissionFileError
 from controller.missions.suite import SuiteOptions, format_table, run_suite, write_junit
+from core.files import OutputDirError
 
 
 def main(argv: list[str]) -> int:
@@ -61,7 +62,7 @@ def main(argv: list[str]) -> int:
             px4_dir=None if args.px4 is None else str(args.px4.resolve()),
         )
         suite = run_suite(args.directory, options)
-    except (MissionFileError, ValueError, ReportFolderError) as exc:
+    except (MissionFileError, ValueError, OutputDirError) as exc:
         print(f"dronectl missions: {exc}", file=sys.stderr)
         return 2
     print(format_table(suite))

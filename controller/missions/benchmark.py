@@ -32,6 +32,7 @@ from controller.missions.report import REPORT_JSON, claim_report_dir
 from controller.missions.results import MissionResult
 from controller.missions.schema import Mission
 from controller.missions.suite import failed_to_start
+from core.files import release_claim
 from core.parallel import gather, task_executor
 from flight.safety import SafetyLimits
 
@@ -94,6 +95,9 @@ def run_benchmark(
     with tempfile.TemporaryDirectory(prefix="bench-missions-") as tmp:
         out = claim_report_dir(report_dir) if report_dir is not None else Path(tmp)
         runs = [(m, out / m.name) for p in config.planners for m in benchmark_missions(config, p, skip_seeds)]
+        for _, path in runs:  # each mission then claims its own (empty) folder
+            path.mkdir()
+        release_claim(out)
         started = time.perf_counter()
         with task_executor(config.parallel, config.ray, _init_worker, (config,)) as pool:
             if pool is None:
@@ -285,8 +289,7 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"{name:<8} {p['successes']:>5}/{p['missions']:<4} {100 * p['success_rate']:>5.1f}% "
             f"{num(p['mean_steps'], '.2f'):>10} {num(p['mean_steps_over_oracle'], '.2f'):>8} {offsets:>23} "
             f"{refinements:>16} {seconds:>14} {num(p['overhead_ms_mean'], '.1f'):>11} "
-            f"{p.get('wrong_target', 0):>12}"
-            + (f" {_absent_cell(p['absent']):>26}" if any_absent else "")
+            f"{p.get('wrong_target', 0):>12}" + (f" {_absent_cell(p['absent']):>26}" if any_absent else "")
         )
     return "\n".join(lines)
 

@@ -23,8 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission, PortSpec, parse_mission
-from controller.missions.suite import UDP_PORTS_PER_MISSION
+from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission, parse_mission
 from controller.planning.latent.instructions import builtin_templates
 from controller.planning.latent.phrasing import TargetName, describe
 from core.targets import ATTRIBUTE_COLOURS, TARGET_KINDS, colour_name
@@ -67,8 +66,6 @@ class BenchmarkConfig:
     absent: float = 0.0
     """The fraction of missions whose instruction names a target the scene does not hold."""
     parallel: int = 1
-    udp_port_base: int = 15400  # 15400-15479: clear of the tests' fixed ports (146xx-150xx)
-    http_port_base: int = 19400
     px4_dir: str | None = None
     """PX4 SITL build folder for `px4-sitl` (None: $PX4_SITL_DIR)."""
     px4_speed: float | str = "max"
@@ -132,7 +129,6 @@ def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozen
         index += 1
         if seed in skip_seeds:
             continue
-        slot = len(missions) % 20
         absent = config.absent > 0 and float(_draw(seed, 2).random()) < config.absent
         data: dict[str, Any] = {
             "name": f"bench-{config.seed}-{len(missions):04d}-{planner}",
@@ -154,10 +150,6 @@ def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozen
             | ({} if config.second_choices is None else {"max_second_choices": config.second_choices}),
             "expect": {"outcome": "target_not_found"} if absent
             else {"outcome": "centred", "max_steps": config.max_steps},
-            "ports": PortSpec(
-                mavlink_udp=config.udp_port_base + UDP_PORTS_PER_MISSION * slot,
-                http=config.http_port_base + slot,
-            ).model_dump(),
             **({"sim_speed": config.sim_speed} if config.vehicle == SIM_MAVLINK else {}),
             **({"px4": {"dir": config.px4_dir, "speed": config.px4_speed, "keep_ulog": False}}
                if config.vehicle == PX4_SITL else {}),

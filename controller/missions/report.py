@@ -15,7 +15,8 @@ OUT/flight.tlog       MAVLink telemetry log (MAVLink flights only; see runner)
 
 from __future__ import annotations
 
-import json
+import contextlib
+import io
 import logging
 import math
 import os
@@ -28,6 +29,7 @@ from matplotlib.figure import Figure  # the object API: no pyplot state, no GUI 
 from PIL import Image
 
 from controller.planning.loop_records import StepRecord
+from core.files import claim_dir, release_claim, write_atomic, write_json_atomic
 from perception.annotate import annotate
 from perception.types import Detection
 
@@ -37,6 +39,8 @@ REPORT_JSON = "report.json"
 TRAJECTORY_PNG = "trajectory.png"
 CAMERA_GIF = "camera.gif"
 GIF_FRAME_MS = 600
+RESERVE = ".reserve"
+RESERVE_BYTES = 32 * 1024
 
 
 def _pair(value: tuple[float, float] | None) -> list[float] | None:
@@ -113,25 +117,11 @@ def timing_summary(steps: list[StepRecord]) -> dict[str, float | None]:
     }
 
 
-class ReportFolderError(FileExistsError):
-    """The report folder already holds something: reports are never written over."""
-
-
 def claim_report_dir(out_dir: str | Path) -> Path:
-    """`out_dir`, created; `ReportFolderError` if it already exists with anything in it.
-
-    A report folder holds one flight: writing a second flight there would truncate the
-    first one's .tlog, replace its report and leave its plot and GIF beside the new one.
-    """
-    out_dir = Path(out_dir)
-    if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
-        held = ", ".join(sorted(p.name for p in out_dir.iterdir())[:4]) if out_dir.is_dir() else "a file"
-        raise ReportFolderError(
-            f"{out_dir} already exists and holds {held}: reports are never overwritten; "
-            "give a new or empty folder"
-        )
-    out_dir.mkdir(parents=True, exist_ok=True)
-    return out_dir
+    """`out_dir` as this flight's own report folder (`core.files.claim_dir`): new, or empty and claimed
+    atomically; `OutputDirError` (one line) if it holds anything, another run holds it, or it cannot be
+    written. A second flight there would truncate the first one's .tlog and replace its report."""
+    return claim_dir(out_dir, "report folder")
 
 
 def fresh_report_dir(base: str | Path) -> Path:
@@ -142,6 +132,19 @@ def fresh_report_dir(base: str | Path) -> Path:
         n += 1
         candidate = base.with_name(f"{base.name}-{n}")
     return candidate
+
+
+def hold_reserve(out_dir: Path, size_bytes: int = RESERVE_BYTES) -> None:
+    """Put `size_bytes` of ballast (`.reserve`) in the report folder before the flight starts filling
+    the disk; `ReportWriter.finish` frees it for the final report. Best effort: said, never raised."""
+    reserve = Path(out_dir) / RESERVE
+    try:
+        with reserve.open("xb") as file:
+            file.write(b"\0" * size_bytes)
+    except OSError as exc:
+        log.warning("no room for the report's reserve in %s: %s", out_dir, exc)
+        with contextlib.suppress(OSError):
+            reserve.unlink()
 
 
 def write_setup_failure(out_dir: Path, mission: Any, error: BaseException) -> None:
@@ -167,20 +170,25 @@ def write_setup_failure(out_dir: Path, mission: Any, error: BaseException) -> No
     }
     try:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
-        _write_json_atomic(Path(out_dir) / REPORT_JSON, data)
+        with contextlib.suppress(OSError):
+            (Path(out_dir) / RESERVE).unlink()
+        write_json_atomic(Path(out_dir) / REPORT_JSON, data, indent=1)
+        release_claim(out_dir)
     except OSError as exc:
         log.error("could not write the report of %s: %s", out_dir, exc)
 
 
-def _write_json_atomic(path: Path, data: dict[str, Any]) -> None:
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=1), encoding="utf-8")
-    os.replace(tmp, path)
-
-
 @dataclass
 class ReportWriter:
-    """Writes one mission's report folder; `add_step` after each step, `finish` once at the end."""
+    """Writes one mission's report folder; `add_step` after each step, `finish` once at the end.
+
+    Recording never costs the flight: a write that fails (a full disk, a read-only or removed folder)
+    is said once and stops the per-step rewrites; `finish` still tries the whole report, then one
+    without its steps, and names what could not be written in `recording_errors`. A file is only
+    ever replaced whole (`core.files.write_atomic`): no `.tmp` or half-written file is left.
+    So that the outcome fits even on a disk the flight filled (its .tlog, mostly), the writer holds
+    `reserve_bytes` of ballast (`.reserve`) from the start and frees it before the final report.
+    """
 
     out_dir: Path
     header: dict[str, Any]  # mission name, planner, ε, scene, ... (JSON-able)
@@ -188,11 +196,18 @@ class ReportWriter:
     media: bool = True
     """Write the plot and the GIF (benchmarks turn this off: the JSON is what they need)."""
     steps: list[StepRecord] = field(default_factory=list)
+    recording_errors: list[str] = field(default_factory=list)
+    """What could not be written, one line each (said once, also in the final report where it fits)."""
+    reserve_bytes: int = RESERVE_BYTES
 
     def __post_init__(self) -> None:
         self.out_dir = Path(self.out_dir)
-        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self._steps_paused = False
+        self._claim_held = True
         self._write({"status": "in_progress"})
+        self._reserve = self.out_dir / RESERVE
+        if not self._reserve.exists():
+            hold_reserve(self.out_dir, self.reserve_bytes)
 
     @property
     def json_path(self) -> Path:
@@ -200,26 +215,58 @@ class ReportWriter:
 
     def add_step(self, step: StepRecord) -> None:
         self.steps.append(step)
-        self._write({"status": "in_progress"})
+        if not self._steps_paused:
+            self._steps_paused = not self._write({"status": "in_progress"})
 
-    def _write(self, summary: dict[str, Any]) -> None:
-        data = {**self.header, **summary, "steps": [step_to_json(s) for s in self.steps]}
-        _write_json_atomic(self.json_path, data)
+    def _write(self, summary: dict[str, Any], with_steps: bool = True) -> bool:
+        data = {
+            **self.header,
+            **summary,
+            "steps": [step_to_json(s) for s in self.steps] if with_steps else [],
+        }
+        try:
+            write_json_atomic(self.json_path, data, indent=1)
+        except OSError as exc:
+            self._failed(REPORT_JSON, exc)
+            return False
+        if self._claim_held:  # the folder holds this flight's report now: the claim marker can go
+            release_claim(self.out_dir)
+            self._claim_held = False
+        return True
+
+    def _failed(self, what: str, exc: BaseException) -> None:
+        line = f"{what}: {exc}"
+        if line not in self.recording_errors:
+            self.recording_errors.append(line)
+            log.error("could not write %s in %s: %s; the flight goes on", what, self.out_dir, exc)
 
     def finish(self, summary: dict[str, Any], tlog: Path | None = None) -> dict[str, Any]:
-        """Write the final report.json, the plot and the GIF; returns the JSON written (without steps)."""
+        """Write the final report.json, the plot and the GIF; returns the JSON written (without steps).
+
+        `final["report_written"]` says whether report.json holds this final state (with every step, or
+        `steps_omitted` when only the summary fitted)."""
         files: dict[str, str | None] = {"report": REPORT_JSON, "trajectory": None, "gif": None, "tlog": None}
         for name, writer in (("trajectory", self._plot), ("gif", self._gif)):
             if not self.media:
                 continue
             try:
                 files[name] = writer()
+            except OSError as exc:
+                self._failed(name, exc)
             except Exception:  # a plot that fails must not lose the report itself
                 log.exception("could not write the %s of %s", name, self.out_dir)
         if tlog is not None and tlog.exists():
             files["tlog"] = os.path.relpath(tlog, self.out_dir)
+        with contextlib.suppress(OSError):
+            self._reserve.unlink()  # its room is the final report's
         final = {"status": "finished", **summary, "timing": timing_summary(self.steps), "files": files}
-        self._write(final)
+        final["recording_errors"] = self.recording_errors
+        written = self._write(final)
+        if not written:  # the steps did not fit: the outcome without them, if that does
+            final["steps_omitted"] = len(self.steps)
+            final["recording_errors"] = list(self.recording_errors)
+            written = self._write(final, with_steps=False)
+        final["report_written"] = written
         return final
 
     def _gif(self) -> str | None:
@@ -227,14 +274,17 @@ class ReportWriter:
             return None
         eps = self.epsilon_px
         frames = [Image.fromarray(annotate(s.frame.image, s.detection, eps, s.action)) for s in self.steps]
+        buffer = io.BytesIO()
         frames[0].save(
-            self.out_dir / CAMERA_GIF,
+            buffer,
+            format="GIF",
             save_all=True,
             append_images=frames[1:],
             duration=GIF_FRAME_MS,
             loop=0,
             optimize=False,
         )
+        write_atomic(self.out_dir / CAMERA_GIF, buffer.getvalue())
         return CAMERA_GIF
 
     def _plot(self) -> str | None:
@@ -265,5 +315,7 @@ class ReportWriter:
         ax_off.set(xlabel="step", ylabel="max(|du|, |dv|) (px)", title="offset from the image centre")
         ax_off.legend(fontsize=8)
         fig.tight_layout()
-        fig.savefig(self.out_dir / TRAJECTORY_PNG, dpi=90)
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format="png", dpi=90)
+        write_atomic(self.out_dir / TRAJECTORY_PNG, buffer.getvalue())
         return TRAJECTORY_PNG

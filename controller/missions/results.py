@@ -42,13 +42,17 @@ class MissionResult:
     """Moves flown on the planner's best-ranked move after it chose "no move" far from centre."""
     info: dict[str, Any] = field(default_factory=dict)
     vehicle_clock_s: dict[str, float] = field(default_factory=dict)
+    """Milestones (connected, ready, offboard) on the vehicle's clock (PX4 SITL: its simulated time)."""
     files: dict[str, str | None] = field(default_factory=dict)
+    """What the report folder holds: report, trajectory, gif, tlog (None: not written)."""
     wrong_target: bool = False
     """The loop ended centred, but per truth another target (not the named one) was within ε."""
     truth_extremes: dict[str, Any] | None = None
     """Simulated MAVLink vehicles: the largest speeds and excursions from home per simulator truth."""
-    """What the report folder holds: report, trajectory, gif, tlog (None: not written)."""
-    """Milestones (connected, ready, offboard) on the vehicle's clock (PX4 SITL: its simulated time)."""
+    recording_errors: tuple[str, ...] = ()
+    """What could not be written (a full disk, a read-only folder): the flight went on without it."""
+    report_written: bool = True
+    """Whether report.json holds the final state (False: only the console has the outcome)."""
 
     @property
     def final_truth_error_px(self) -> float | None:

@@ -27,7 +27,13 @@ from dataclasses import replace
 from pathlib import Path
 
 from controller.missions.kits.base import FlightKit, LoadedModels
-from controller.missions.report import REPORT_JSON, ReportWriter, claim_report_dir, write_setup_failure
+from controller.missions.report import (
+    REPORT_JSON,
+    ReportWriter,
+    claim_report_dir,
+    hold_reserve,
+    write_setup_failure,
+)
 from controller.missions.results import MissionResult, count_steps, judge, wrong_target
 from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission
 from controller.planning.grounding import TargetQuery
@@ -113,7 +119,11 @@ def fly_kit(
         from controller.missions.rerun_log import RerunRecorder
 
         recorder = RerunRecorder(rerun_path, kit.epsilon_px, header)
-    loop.on_step = writer.add_step if recorder is None else _both(writer.add_step, recorder.add_step)
+    loop.on_step = (
+        writer.add_step
+        if recorder is None
+        else _both(writer.add_step, _guarded(recorder.add_step, "the Rerun recording", writer))
+    )
     outcome, message, error = Outcome.ABORTED, "", None
     vehicle_start_s = vehicle_end_s = 0.0
     clock: dict[str, float] = {}  # milestones on the vehicle's clock (PX4 SITL's: simulated time)
@@ -141,12 +151,37 @@ def fly_kit(
         log.error("mission %s aborted: %s", mission.name, error)
     finally:
         if recorder is not None:
-            recorder.finish(outcome.value, message)
+            try:
+                recorder.finish(outcome.value, message)
+            except Exception as exc:
+                writer.recording_errors.append(f"the Rerun recording: {exc}")
+                log.error("the Rerun recording could not be finished: %s", exc)
         mission_result = _finish(
             kit, mission, writer, loop, outcome, message, error, time.perf_counter() - wall_start,
             max(0.0, vehicle_end_s - vehicle_start_s), clock, targets_truth,
         )  # fmt: skip
     return mission_result
+
+
+def _guarded(
+    record: Callable[[StepRecord], None], what: str, writer: ReportWriter
+) -> Callable[[StepRecord], None]:
+    """`record`, stopped (and said once, in the report too) at its first failure: a recording that
+    fails never ends a flight."""
+    failed = False
+
+    def on_step(step: StepRecord) -> None:
+        nonlocal failed
+        if failed:
+            return
+        try:
+            record(step)
+        except Exception as exc:
+            failed = True
+            writer.recording_errors.append(f"{what}: {exc}")
+            log.error("%s stopped: %s; the flight goes on", what, exc)
+
+    return on_step
 
 
 def _both(
@@ -203,7 +238,9 @@ def _finish(
         "truth_extremes": kit.truth_extremes() if kit.truth_extremes is not None else None,
         "error": error,
     }
-    final = writer.finish(summary, kit.tlog_path)
+    if kit.tlog is not None and kit.tlog.recording_error is not None:
+        writer.recording_errors.append(f"flight.tlog: {kit.tlog.recording_error}")
+    final = writer.finish(summary, None if kit.tlog is None else kit.tlog.path)
     return MissionResult(
         name=mission.name,
         planner=kit.planner.name,
@@ -228,6 +265,8 @@ def _finish(
         files=final["files"],
         truth_extremes=summary["truth_extremes"],
         wrong_target=wrong is not None,
+        recording_errors=tuple(final["recording_errors"]),
+        report_written=final["report_written"],
     )
 
 
@@ -262,14 +301,17 @@ def run_mission(
     media: bool = True,
     models: LoadedModels | None = None,
     rerun_path: str | Path | None = None,
+    claimed: bool = False,
 ) -> MissionResult:
     """Build the mission's kit, fly it and write the report folder `out_dir` (`media`: plot and GIF too).
 
     `out_dir` must not exist or be empty: a report is never written over another
-    (`ReportFolderError`). A mission that cannot start (a bad checkpoint, a camera that
-    does not open, a simulator that fails) still leaves a report saying why, then raises.
+    (`core.files.OutputDirError`; `claimed`: the caller already claimed it). A mission that cannot
+    start (a bad checkpoint, a camera that does not open, a simulator that fails) still leaves a
+    report saying why, then raises.
     """
-    out_dir = claim_report_dir(out_dir)
+    out_dir = Path(out_dir) if claimed else claim_report_dir(out_dir)
+    hold_reserve(out_dir)  # room for the outcome, before the flight's .tlog can fill the disk
     try:
         if rerun_path is not None:  # before anything starts: a recording is never overwritten
             from controller.missions.rerun_log import check_rerun_path

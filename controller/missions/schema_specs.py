@@ -11,10 +11,19 @@ from core.config_files import StrictModel
 
 
 class PortSpec(StrictModel):
-    """Ports for a `sim-mavlink` mission (the suite assigns distinct ones to parallel missions)."""
+    """Ports for a `sim-mavlink` mission: "auto" (the default) takes free ones per run, so any number of
+    runs fly at once; a number fixes one (UDP p: the sim-vehicle, p+1: the .tlog relay, p+2: MAVSDK),
+    checked free before anything starts (`core.ports.check_free`)."""
 
-    mavlink_udp: int = Field(default=14840, ge=1024, le=65535)
-    http: int = Field(default=18840, ge=1024, le=65535)
+    mavlink_udp: int | Literal["auto"] = "auto"
+    http: int | Literal["auto"] = "auto"
+
+    @field_validator("mavlink_udp", "http")
+    @classmethod
+    def _port_range(cls, value: int | str) -> int | str:
+        if isinstance(value, int) and not 1024 <= value <= 65533:
+            raise ValueError(f"must be a port in 1024..65533 or 'auto', got {value}")
+        return value
 
 
 class Px4Spec(StrictModel):

@@ -23,21 +23,19 @@ from controller.missions.report import claim_report_dir
 from controller.missions.results import MissionResult
 from controller.missions.schema import (
     PX4_SITL,
-    SIM_MAVLINK,
     Mission,
     MissionFileError,
-    PortSpec,
     load_mission,
 )
+from core.files import release_claim
 
 log = logging.getLogger(__name__)
 
-UDP_PORTS_PER_MISSION = 4  # sim-vehicle bind, its send-to (the tlog proxy), MAVSDK's, one spare
 
 
 @dataclass(frozen=True)
 class SuiteOptions:
-    """How to run a suite. Ports: slot i uses UDP `udp_port_base + 4i ...` and HTTP `http_port_base + i`."""
+    """How to run a suite (simulated vehicles take free ports per mission: any number run at once)."""
 
     report_dir: Path
     parallel: int = 1
@@ -45,21 +43,12 @@ class SuiteOptions:
     tags: tuple[str, ...] = ()
     """Fly only missions with at least one of these tags (empty: all)."""
     exclude_tags: tuple[str, ...] = ()
-    udp_port_base: int = 14800
-    http_port_base: int = 18800
-    max_slots: int = 25
     px4_dir: str | None = None
     """The PX4 SITL folder for `px4-sitl` missions that name none (None: $PX4_SITL_DIR)."""
 
     def __post_init__(self) -> None:
         if self.parallel < 1:
             raise ValueError(f"parallel must be >= 1, got {self.parallel}")
-
-    def ports(self, slot: int) -> PortSpec:
-        return PortSpec(
-            mavlink_udp=self.udp_port_base + UDP_PORTS_PER_MISSION * (slot % self.max_slots),
-            http=self.http_port_base + slot % self.max_slots,
-        )
 
 
 @dataclass(frozen=True)
@@ -133,16 +122,10 @@ def failed_to_start(mission: Mission, error: str, wall_s: float) -> MissionResul
     )
 
 
-def assign_ports(missions: list[Mission], options: SuiteOptions) -> list[Mission]:
-    """Give every sim-vehicle mission its own port slot, and px4-sitl missions the suite's PX4 folder.
-
-    (A px4-sitl mission's ports follow its PX4 instance, which each run locks for itself.)
-    """
-    out, slot = [], 0
+def with_px4_dir(missions: list[Mission], options: SuiteOptions) -> list[Mission]:
+    """px4-sitl missions that name no PX4 folder get the suite's."""
+    out = []
     for mission in missions:
-        if mission.vehicle == SIM_MAVLINK:
-            mission = mission.model_copy(update={"ports": options.ports(slot)})
-            slot += 1
         if mission.vehicle == PX4_SITL and mission.px4.dir is None and options.px4_dir is not None:
             mission = mission.model_copy(
                 update={"px4": mission.px4.model_copy(update={"dir": options.px4_dir})}
@@ -165,8 +148,11 @@ def run_suite(directory: str | Path, options: SuiteOptions) -> SuiteResult:
         raise ValueError(
             f"no mission in {directory} matches tags {options.tags} minus {options.exclude_tags}"
         )
-    missions = assign_ports(missions, options)
+    missions = with_px4_dir(missions, options)
     out = claim_report_dir(options.report_dir)  # a suite's reports never go over an earlier run's
+    for mission in missions:  # each mission then claims its own (empty) folder
+        (out / mission.name).mkdir()
+    release_claim(out)
     results: dict[str, MissionResult] = {}
     if options.parallel == 1:
         for mission in missions:

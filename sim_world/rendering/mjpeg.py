@@ -186,6 +186,7 @@ class MjpegServer:
 class _Httpd(ThreadingHTTPServer):
     daemon_threads = True
     allow_reuse_address = True
+    request_queue_size = 256  # the listen backlog: many viewers connecting at once all get in (was 5)
 
     def __init__(
         self, address: tuple[str, int], handler: type, owner: MjpegServer, client_timeout_s: float

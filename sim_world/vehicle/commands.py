@@ -46,6 +46,20 @@ class Command:
         return cls(msg.command, tuple(float(v) for v in p))  # type: ignore[arg-type]
 
 
+def pack(msg: mavlink.MAVLink_message, mav: mavlink.MAVLink) -> bytes:
+    """`msg` as bytes, with `mav`'s identity and sequence (raises on a field out of its range)."""
+    buf = msg.pack(mav)
+    mav.seq = (mav.seq + 1) % 256
+    return bytes(buf)
+
+
+def _message_id(value: float) -> int | None:
+    """A MAVLink message id from a command parameter: a whole number in 0..2^24 - 1, else None."""
+    if not math.isfinite(value) or value != round(value) or not 0 <= value < 1 << 24:
+        return None
+    return int(value)
+
+
 class MessageHandler:
     """Turns one received message into vehicle actions and the replies for its sender."""
 
@@ -71,21 +85,29 @@ class MessageHandler:
         self._t0 = wall_clock()
         self._last_rejection: dict[str, float] = {}
 
-    def handle(self, msg: mavlink.MAVLink_message) -> list[mavlink.MAVLink_message]:
-        """The replies to send back to `msg`'s sender (may be empty); never raises on bad content."""
+    def handle(self, msg: mavlink.MAVLink_message, mav: mavlink.MAVLink) -> list[bytes]:
+        """The replies to `msg`'s sender, packed with `mav` (may be empty); never raises.
+
+        Replies are packed here, inside the error handling: a value from the network that fits
+        no field (a message id of 70000 echoed in MESSAGE_INTERVAL, say) rejects that message,
+        and nothing from the network can end the vehicle loop.
+        """
         try:
-            return self._handle(msg)
-        except (ValueError, TypeError, OverflowError, KeyError) as exc:
+            return [pack(reply, mav) for reply in self._handle(msg)]
+        except Exception as exc:  # any content at all: reject this message, keep the vehicle
             log.warning(
                 "bad %s from %d/%d: %s", msg.get_type(), msg.get_srcSystem(), msg.get_srcComponent(), exc
             )
             self._commander.say(M.MAV_SEVERITY_WARNING, f"Rejected malformed {msg.get_type()}")
-            if msg.get_type() in ("COMMAND_LONG", "COMMAND_INT"):
+            if msg.get_type() not in ("COMMAND_LONG", "COMMAND_INT"):
+                return []
+            try:
                 ack = M.MAVLink_command_ack_message(
                     msg.command, M.MAV_RESULT_FAILED, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
                 )
-                return [ack]
-            return []
+                return [pack(ack, mav)]
+            except Exception:  # fields that do not even fit an ack: no reply
+                return []
 
     def _handle(self, msg: mavlink.MAVLink_message) -> list[mavlink.MAVLink_message]:
         kind = msg.get_type()
@@ -147,16 +169,21 @@ class MessageHandler:
         if c == M.MAV_CMD_NAV_LAND:
             return [commander.land()]
         if c in (M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
-            msg_id = M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if c != M.MAV_CMD_REQUEST_MESSAGE else round(p[0])
-            if not self._builder.supports(msg_id):
+            msg_id = (
+                M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if c != M.MAV_CMD_REQUEST_MESSAGE else _message_id(p[0])
+            )
+            if msg_id is None or not self._builder.supports(msg_id):
                 return [M.MAV_RESULT_UNSUPPORTED]
             extra.append(self._builder.build(msg_id, self._snapshot()))
             return [M.MAV_RESULT_ACCEPTED]
         if c == M.MAV_CMD_SET_MESSAGE_INTERVAL:
-            ok = self._scheduler.set_interval(round(p[0]), p[1], self._clock())
+            msg_id = _message_id(p[0])
+            ok = msg_id is not None and self._scheduler.set_interval(msg_id, p[1], self._clock())
             return [M.MAV_RESULT_ACCEPTED if ok else M.MAV_RESULT_UNSUPPORTED]
         if c == M.MAV_CMD_GET_MESSAGE_INTERVAL:
-            msg_id = round(p[0])
+            msg_id = _message_id(p[0])
+            if msg_id is None or msg_id > 0xFFFF:  # MESSAGE_INTERVAL carries a 16-bit id
+                return [M.MAV_RESULT_DENIED]
             extra.append(M.MAVLink_message_interval_message(msg_id, self._scheduler.interval_us(msg_id)))
             return [M.MAV_RESULT_ACCEPTED]
         log.info("command %d unsupported", c)

@@ -31,6 +31,9 @@ class SimVehicleConfig:
     remote_port: int | None = None
     local_port: int | None = None
     sysid: int | None = None
+    adopt_client: bool = True
+    """Also stream telemetry to the first peer besides the remote that speaks MAVLink (a client that
+    connects out); a vehicle started for a mission sets False: its remote is its only controller."""
     speed: SimSpeed = 1.0  # simulated seconds per wall second, or "max" (see `parse_sim_speed`)
     commander: CommanderConfig = field(default_factory=CommanderConfig)
     params: dict[str, float] = field(default_factory=dict)  # PX4 parameter overrides at boot

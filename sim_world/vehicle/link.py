@@ -1,9 +1,13 @@
 """The vehicle's UDP MAVLink 2 endpoint, PX4 SITL style.
 
 PX4 SITL's offboard link binds a local port (14580 + instance) and sends to
-127.0.0.1:14540 + instance, where MAVSDK or another offboard API listens. Like
-PX4, the vehicle also answers whoever talks to it: the latest sender becomes a
-second destination, so a client that connects out (pymavlink `udpout:`) works too.
+127.0.0.1:14540 + instance, where MAVSDK or another offboard API listens. Replies
+(acks, parameter values) go to whoever asked. Telemetry goes to the configured remote
+and, where `adopt_client` allows (a vehicle served on its own, for a client that
+connects out: pymavlink `udpout:`), to the first other peer that speaks MAVLink to
+it, locked: a later sender never becomes a destination, so a stranger cannot take
+over the stream. A vehicle started for a mission adopts nobody: its remote is the
+controller.
 """
 
 from __future__ import annotations
@@ -35,10 +39,20 @@ class LinkStats:
 class UdpMavlinkLink:
     """A non-blocking UDP socket that sends and receives MAVLink 2 messages."""
 
-    def __init__(self, bind_host: str, local_port: int, remote: Address, sysid: int, compid: int):
+    def __init__(
+        self,
+        bind_host: str,
+        local_port: int,
+        remote: Address,
+        sysid: int,
+        compid: int,
+        adopt_client: bool = True,
+    ):
         self.remote = remote
         self.stats = LinkStats()
-        self.last_sender: Address | None = None
+        self.adopt_client = adopt_client
+        self.client: Address | None = None
+        """The one peer besides `remote` that gets telemetry (the first to speak MAVLink), or None."""
         self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
@@ -70,25 +84,38 @@ class UdpMavlinkLink:
             parser = mavlink.MAVLink(None)
             parser.robust_parsing = True
             valid = False
-            for msg in parser.parse_buffer(data) or []:
+            try:
+                messages = parser.parse_buffer(data) or []
+            except Exception:  # a parser that chokes on hostile bytes: nothing usable in them
+                self.stats.bad += 1
+                continue
+            for msg in messages:
                 if isinstance(msg, (mavlink.MAVLink_bad_data, mavlink.MAVLink_unknown)):
                     self.stats.bad += 1  # (an unknown id cannot be CRC-checked: random bytes pass as one)
                     continue
                 self.stats.received += 1
                 out.append((msg, addr))
                 valid = True
-            if valid:  # only a peer that speaks MAVLink becomes a telemetry destination
-                self.last_sender = addr
+            if valid and self.adopt_client and self.client is None and addr != self.remote:
+                self.client = addr  # only a peer that speaks MAVLink, and only the first
+                log.info("MAVLink client at %s:%d gets telemetry too", *addr)
 
     def destinations(self) -> list[Address]:
-        if self.last_sender is None or self.last_sender == self.remote:
-            return [self.remote]
-        return [self.remote, self.last_sender]
+        return [self.remote] if self.client is None else [self.remote, self.client]
+
+    @property
+    def mav(self) -> mavlink.MAVLink:
+        """The sender identity (system, component, sequence) replies are packed with."""
+        return self._mav
 
     def send(self, msg: mavlink.MAVLink_message, to: Address | None = None) -> None:
         """Send to one address, or to every destination when `to` is None."""
         buf = msg.pack(self._mav)
         self._mav.seq = (self._mav.seq + 1) % 256
+        self.send_bytes(buf, to)
+
+    def send_bytes(self, buf: bytes, to: Address | None = None) -> None:
+        """Send packed bytes to one address, or to every destination when `to` is None."""
         for addr in [to] if to is not None else self.destinations():
             try:
                 self._sock.sendto(buf, addr)

@@ -207,7 +207,8 @@ def run_to_json(run: SimVehicleRun) -> dict[str, Any]:
     return {
         "vehicle": {
             "instance": v.instance, "bind_host": v.bind_host, "remote_host": v.remote_host,
-            "remote_port": v.remote_port, "local_port": v.local_port, "sysid": v.sysid, "speed": v.speed,
+            "remote_port": v.remote_port, "local_port": v.local_port, "sysid": v.sysid,
+            "adopt_client": v.adopt_client, "speed": v.speed,
             "arming_boot_delay_s": v.commander.arming_boot_delay_s, "params": dict(v.params),
             "video": v.video, "video_port": v.video_port, "video_host": v.video_host,
             "video_fps": v.video_fps,

@@ -119,6 +119,7 @@ class SimVehicle:
         self._stats = LoopStats()
         self._stats_lock = threading.Lock()
         self._snapshot: VehicleSnapshot = self._take_snapshot()
+        self._telemetry_failed: set[int] = set()
 
     # ------------------------------------------------------------ lifecycle
     def start(self) -> SimVehicle:
@@ -135,6 +136,7 @@ class SimVehicle:
             (cfg.remote_host, cfg.mavlink_remote_port),
             cfg.system_id,
             1,
+            adopt_client=cfg.adopt_client,
         )
         self._thread = threading.Thread(target=self._run, name=f"sim-vehicle-{cfg.instance}", daemon=True)
         self._thread.start()
@@ -261,8 +263,8 @@ class SimVehicle:
             self.commander.update()
             # 2. messages in, replies to their sender
             for msg, addr in link.receive():
-                for reply in handler.handle(msg):
-                    link.send(reply, to=addr)
+                for reply in handler.handle(msg, link.mav):  # never raises: see MessageHandler.handle
+                    link.send_bytes(reply, to=addr)
             # 3. telemetry and status texts to every destination
             due = scheduler.due(now)
             self._snapshot = snap = self._take_snapshot()
@@ -270,7 +272,7 @@ class SimVehicle:
                 last_state = state
                 due = sorted(set(due) | set(_STATE_MESSAGES))
             for msg_id in due:
-                link.send(self._builder.build(msg_id, snap))
+                self._send_telemetry(link, msg_id, snap)
             while self.commander.texts:
                 text_id = text_id % 65535 + 1
                 for msg in _statustext(*self.commander.texts.popleft(), text_id):
@@ -289,6 +291,16 @@ class SimVehicle:
                 continue
             wake = min(wall0 + (model.time_s + dt - sim0) / speed, scheduler.next_due_s())
             select.select([link], [], [], min(max(wake - time.monotonic(), _MIN_WAIT_S), _MAX_WAIT_S))
+
+    def _send_telemetry(self, link: UdpMavlinkLink, msg_id: int, snap: VehicleSnapshot) -> None:
+        """One streamed message to every destination; a message that cannot be built is skipped (and said
+        once per kind), never the end of the loop."""
+        try:
+            link.send(self._builder.build(msg_id, snap))
+        except Exception as exc:
+            if msg_id not in self._telemetry_failed:
+                self._telemetry_failed.add(msg_id)
+                log.error("telemetry message %d could not be built or sent: %r", msg_id, exc)
 
     def _lockstep_limit_s(self, now_s: float) -> float | None:
         """Speed "max": in OFFBOARD, the simulated time the vehicle may not pass until the client's next

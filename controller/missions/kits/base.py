@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from controller.missions.schema import Mission
 from controller.planning.grounding import TargetQuery
@@ -22,6 +22,16 @@ from perception.camera import Camera
 from perception.detector import Detector
 
 TLOG_NAME = "flight.tlog"
+
+
+class TlogRecording(Protocol):
+    """A .tlog being recorded (`flight.relay.MavlinkRelay`): where it is now, and why it stopped early."""
+
+    @property
+    def path(self) -> Path | None: ...
+
+    @property
+    def recording_error(self) -> str | None: ...
 
 
 @dataclass
@@ -43,7 +53,8 @@ class FlightKit:
     """The takeoff altitude where the start pose needs one (sim-vehicle); None: the mission's."""
     info: dict[str, Any] = field(default_factory=dict)
     """What the report should say about the setup (scene seed, target kind, start offset, URLs)."""
-    tlog_path: Path | None = None
+    tlog: TlogRecording | None = None
+    """The .tlog being recorded (the relay), if any: its path and why it stopped early, if it did."""
     truth_extremes: Callable[[], dict[str, Any] | None] | None = None
     """Judging only: the simulator's largest speeds and excursions from home over the flight."""
     epsilon_px: float | None = None

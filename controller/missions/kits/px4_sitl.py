@@ -89,6 +89,7 @@ def open_px4_sitl_kit(
                 mavsdk_port,
                 out_dir / TLOG_NAME,
                 faults=link_faults_for(mission),
+                vehicle_system_id=system_id,
             )
         )
         sim = stack.enter_context(
@@ -129,5 +130,5 @@ def open_px4_sitl_kit(
                 "simulator_pid": sim.pid,
                 "px4_pid": sim.ready.get("px4_pid"),
             },
-            tlog_path=tlog.path,
+            tlog=tlog,
         )  # fmt: skip

@@ -8,7 +8,6 @@ imports the simulator: a real-vehicle mission loads no `sim_world` module and no
 from __future__ import annotations
 
 import logging
-import re
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
@@ -24,6 +23,7 @@ from controller.missions.kits.base import (
 from controller.missions.schema import Mission
 from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
+from flight.urls import udpin_address
 from perception.stream_camera import StreamCamera
 
 log = logging.getLogger(__name__)
@@ -31,29 +31,26 @@ log = logging.getLogger(__name__)
 REAL_CLIENT_PORT_SHIFT = 1000
 
 
-def _udpin_port(url: str) -> int | None:
-    match = re.fullmatch(r"udpin://[^:/]*:(\d+)", url.strip())
-    return int(match.group(1)) if match else None
-
-
 @contextmanager
 def open_real_kit(mission: Mission, out_dir: Path, models: LoadedModels | None = None) -> Iterator[FlightKit]:
     """A vehicle at `mission.vehicle` and its camera stream; no truth. Fails fast on a bad URL."""
     with ExitStack() as stack:
         url = mission.vehicle
-        tlog_path = None
-        port = _udpin_port(url)
-        if port is not None:
-            # The relay takes the vehicle's port; MAVSDK listens behind it, REAL_CLIENT_PORT_SHIFT higher.
+        tlog = None
+        address = udpin_address(url)
+        if address is not None:
+            # The relay takes the vehicle's port on the host the URL names, and locks onto the first
+            # autopilot heard there; MAVSDK listens behind it on loopback, REAL_CLIENT_PORT_SHIFT higher.
+            host, port = address
             relay = MavlinkRelay(
                 port,
                 port + REAL_CLIENT_PORT_SHIFT,
                 out_dir / TLOG_NAME,
-                listen_host="0.0.0.0",
+                listen_host=host,
                 faults=link_faults_for(mission),
             )
             tlog = stack.enter_context(relay)
-            url, tlog_path = f"udpin://127.0.0.1:{port + REAL_CLIENT_PORT_SHIFT}", tlog.path
+            url = f"udpin://127.0.0.1:{port + REAL_CLIENT_PORT_SHIFT}"
         else:
             log.warning("%s is not a udpin:// link: flying without a .tlog", url)
         vehicle = stack.enter_context(MavsdkVehicle(MavsdkConfig(url=url, shown_url=mission.vehicle)))
@@ -67,6 +64,6 @@ def open_real_kit(mission: Mission, out_dir: Path, models: LoadedModels | None =
             planner=planner,
             instruction=mission.instruction_text(mission.target_kind, mission.target_attribute),
             info={"backend": "MAVSDK + stream camera", "vehicle": mission.vehicle, "camera": mission.camera},
-            tlog_path=tlog_path,
+            tlog=tlog,
             image_width_px=frame.width,
         )

@@ -3,9 +3,11 @@
 The sim-vehicle runs as a child process (`python -m sim_world.vehicle`, through
 `flight.sim_launcher`: its own session, gone with us) with the mission's scene, seed,
 wind, faults and start offset; the controller connects with MAVSDK and reads the MJPEG
-stream with OpenCV, exactly as it would a real drone. Ports (one slot per mission, from
-`mission.ports`): the sim binds UDP `p`, sends to `p+1`, where the .tlog relay listens and
-forwards to MAVSDK on `p+2`; video on HTTP `ports.http`.
+stream with OpenCV, exactly as it would a real drone. The sim sends to the .tlog relay, which
+forwards to MAVSDK. Ports (`mission.ports`): "auto" (the default) takes free ones for this run
+(the relay and the sim bind port 0 and say which they got; MAVSDK gets a port the kernel picks),
+so any number of missions fly at once; fixed ones (the sim binds UDP `p`, the relay `p+1`, MAVSDK
+`p+2`, video HTTP `ports.http`) are checked free before anything starts, naming the one taken.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from controller.missions.kits.simulated import (
 )
 from controller.missions.schema import Mission, StartOffset
 from controller.missions.setup import start_offset_for
+from core.ports import check_free, free_port
 from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
 from flight.sim_launcher import SimulatorProcess
@@ -35,15 +38,17 @@ from sim_world.vehicle.serve import SimVehicleRun, run_to_json
 READY_TIMEOUT_S = 60.0
 
 
-def sim_vehicle_run(mission: Mission, start: StartOffset, system_id: int) -> SimVehicleRun:
-    """The sim-vehicle for a mission: `mission.sim_speed`, PX4's boot rules, landed below the start pose."""
-    p = mission.ports.mavlink_udp
+def sim_vehicle_run(mission: Mission, start: StartOffset, system_id: int, relay_port: int) -> SimVehicleRun:
+    """The sim-vehicle for a mission: `mission.sim_speed`, PX4's boot rules, landed below the start pose,
+    streaming to the relay on `relay_port`."""
+    ports = mission.ports
     vehicle = SimVehicleConfig(
         speed=mission.sim_speed,
-        local_port=p,
-        remote_port=p + 1,
+        local_port=0 if ports.mavlink_udp == "auto" else ports.mavlink_udp,
+        remote_port=relay_port,
         sysid=system_id,
-        video_port=mission.ports.http,
+        adopt_client=False,  # telemetry to the relay (the controller) only
+        video_port=0 if ports.http == "auto" else ports.http,
         video_fps=15.0,
     )
     return SimVehicleRun(
@@ -62,12 +67,25 @@ def open_sim_mavlink_kit(
     out_dir.mkdir(parents=True, exist_ok=True)
     system_id = new_system_id()
     p, http = mission.ports.mavlink_udp, mission.ports.http
-    run = sim_vehicle_run(mission, start, system_id)
+    if p == "auto":
+        relay_port, mavsdk_port = 0, free_port("udp")
+    else:
+        relay_port, mavsdk_port = p + 1, p + 2
+        check_free([("udp", p, "sim-vehicle"), ("udp", p + 1, "relay"), ("udp", p + 2, "MAVSDK")])
+    if http != "auto":
+        check_free([("tcp", http, "sim-vehicle video")])
     with ExitStack() as stack:
-        # The relay takes the vehicle's remote port first: a port in use fails before anything starts.
+        # The relay binds first: the sim-vehicle streams to the port it got.
         tlog = stack.enter_context(
-            MavlinkRelay(p + 1, p + 2, out_dir / TLOG_NAME, faults=link_faults_for(mission))
+            MavlinkRelay(
+                relay_port,
+                mavsdk_port,
+                out_dir / TLOG_NAME,
+                faults=link_faults_for(mission),
+                vehicle_system_id=system_id,
+            )
         )
+        run = sim_vehicle_run(mission, start, system_id, tlog.listen_address[1])
         sim = stack.enter_context(
             SimulatorProcess(
                 "sim_world.vehicle", run_to_json(run), out_dir / "sim_vehicle.log", SIM_READY_PREFIX,
@@ -79,7 +97,9 @@ def open_sim_mavlink_kit(
         clock = "wall" if mission.sim_speed == 1.0 else "vehicle"
         vehicle = stack.enter_context(
             MavsdkVehicle(
-                MavsdkConfig(url=f"udpin://127.0.0.1:{p + 2}", expected_system_id=system_id, clock=clock)
+                MavsdkConfig(
+                    url=f"udpin://127.0.0.1:{mavsdk_port}", expected_system_id=system_id, clock=clock
+                )
             )
         )
         camera = stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
@@ -87,11 +107,16 @@ def open_sim_mavlink_kit(
             mission, models, vehicle, camera, truth, run.scene, start,
             info={
                 "backend": "sim-vehicle subprocess over MAVLink (MAVSDK) + MJPEG stream",
-                "ports": {"sim_udp": p, "tlog_relay_udp": p + 1, "mavsdk_udp": p + 2, "video_http": http},
+                "ports": {
+                    "sim_udp": sim.ready["local_address"][1],
+                    "tlog_relay_udp": tlog.listen_address[1],
+                    "mavsdk_udp": mavsdk_port,
+                    "video_http": sim.ready["video_url"],
+                },
                 "tlog": "recorded by flight.relay between sim-vehicle and MAVSDK",
                 "system_id": system_id,
                 "sim_speed": mission.sim_speed,
                 "simulator_pid": sim.pid,
             },
-            tlog_path=tlog.path,
+            tlog=tlog,
         )  # fmt: skip

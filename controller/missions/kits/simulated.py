@@ -11,12 +11,12 @@ import json
 import logging
 import secrets
 import urllib.request
-from pathlib import Path
 from typing import Any
 
 from controller.missions.kits.base import (
     FlightKit,
     LoadedModels,
+    TlogRecording,
     image_detector_for,
     named_target,
     planner_for,
@@ -118,7 +118,7 @@ def simulated_mavlink_kit(
     scene: SceneConfig,
     start: StartOffset,
     info: dict[str, Any],
-    tlog_path: Path | None,
+    tlog: TlogRecording | None,
 ) -> FlightKit:
     """The kit of a simulated vehicle flown over MAVLink (sim-vehicle, PX4 SITL): it starts landed below
     the mission's start pose, so the takeoff climbs to the pose's height; truth judges, never flies."""
@@ -151,6 +151,6 @@ def simulated_mavlink_kit(
             "start": start.model_dump(),
             **info,
         },
-        tlog_path=tlog_path,
+        tlog=tlog,
         image_width_px=SIM_IMAGE_PX,
     )

@@ -1,0 +1,104 @@
+"""Writing what a run records without losing it or faking it: atomic files and claimed folders.
+
+- `write_atomic(path, data)` / `write_json_atomic(path, obj)`: through `path.tmp` and a rename, so a
+  reader sees the old whole file or the new whole file, never half of one. A failed write (a full
+  disk, a read-only or removed folder) removes the temporary file and raises: nothing half-written
+  is left looking whole.
+- `claim_dir(path, what)`: make `path` this run's own output folder, atomically. A new folder, or
+  an existing empty one, is claimed by creating the marker `.claim` in it exclusively (O_EXCL), so of
+  two runs started at once on one folder exactly one gets it; the other is told who holds it.
+  `release_claim(path)` removes the marker once the run has written its first file there.
+  A folder that cannot be written (read-only, no space) is refused here, before anything starts.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+CLAIM_MARKER = ".claim"
+
+
+class OutputDirError(FileExistsError):
+    """An output folder that cannot be this run's: it holds something, another run holds it, or it
+    cannot be written. The message names the folder and what to do."""
+
+
+def write_atomic(path: str | Path, data: bytes | str) -> None:
+    """Write `data` to `path` through a temporary file and a rename; on failure nothing is left behind."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    payload = data.encode("utf-8") if isinstance(data, str) else data
+    try:
+        with tmp.open("wb") as file:
+            file.write(payload)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def write_json_atomic(path: str | Path, data: Any, indent: int | None = 2) -> None:
+    """`data` as JSON (a trailing newline) written with `write_atomic`."""
+    write_atomic(path, json.dumps(data, indent=indent) + "\n")
+
+
+def claim_dir(path: str | Path, what: str = "output folder") -> Path:
+    """`path` as this run's own folder: created if new, refused if it holds anything or cannot be written.
+
+    Raises `OutputDirError` with one line that says why and what to do.
+    """
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.mkdir(exist_ok=True)
+    except FileExistsError:
+        raise OutputDirError(f"{what} {path} exists and is not a folder") from None
+    except OSError as exc:
+        raise OutputDirError(f"cannot create the {what} {path}: {exc.strerror or exc}") from None
+    marker = path / CLAIM_MARKER
+    try:
+        fd = os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+    except FileExistsError:
+        holder = _read_holder(marker)
+        raise OutputDirError(
+            f"{what} {path} is being written by another run{holder}; give another folder "
+            f"(or remove {marker} if that run is gone)"
+        ) from None
+    except OSError as exc:
+        raise OutputDirError(f"cannot write in the {what} {path}: {exc.strerror or exc}") from None
+    try:
+        os.write(fd, f"{os.getpid()}\n".encode())
+    except OSError as exc:
+        os.close(fd)
+        with contextlib.suppress(OSError):
+            marker.unlink()
+        raise OutputDirError(f"cannot write in the {what} {path}: {exc.strerror or exc}") from None
+    os.close(fd)
+    held = sorted(p.name for p in path.iterdir() if p.name != CLAIM_MARKER)
+    if held:
+        marker.unlink()
+        shown = ", ".join(held[:4]) + (", ..." if len(held) > 4 else "")
+        raise OutputDirError(
+            f"{what} {path} already holds {shown}: nothing recorded is ever written over; "
+            "give a new or empty folder"
+        )
+    return path
+
+
+def release_claim(path: str | Path) -> None:
+    """Remove the claim marker (once the run's first file is in the folder); idempotent."""
+    with contextlib.suppress(FileNotFoundError):
+        (Path(path) / CLAIM_MARKER).unlink()
+
+
+def _read_holder(marker: Path) -> str:
+    try:
+        pid = int(marker.read_text().strip())
+    except (OSError, ValueError):
+        return ""
+    return f" (pid {pid})"

@@ -1,0 +1,73 @@
+"""Ports, in one place: the conventions of the programs we talk to, and free ports chosen per run.
+
+A run that starts its own vehicle (sim-vehicle, PX4 SITL, ArduPilot SITL) takes ports nobody holds,
+checked before anything starts: where a program lets us, a socket binds port 0 and the kernel picks
+(nothing to race for); where a client needs a number first (MAVSDK's `udpin://`), `free_port` asks
+the kernel for one. A port a user fixes is checked with `check_free`, which names the port taken.
+
+The fixed numbers below are conventions of other programs, not choices of ours: PX4 SITL instance N
+listens and sends on `base + N`, as its own start scripts say.
+"""
+
+from __future__ import annotations
+
+import errno
+import socket
+from collections.abc import Iterable
+from typing import Literal
+
+Protocol = Literal["udp", "tcp"]
+LOOPBACK = "127.0.0.1"
+
+# PX4 SITL, instance N (PX4's px4-rc.mavlink and px4-rc.simulator add N to each).
+PX4_SIMULATOR_TCP = 4560
+"""PX4 dials its simulator here (TCP client)."""
+PX4_OFFBOARD_REMOTE_UDP = 14540
+"""PX4 sends its offboard/API link here (MAVSDK listens: `udpin://0.0.0.0:14540`)."""
+PX4_OFFBOARD_LOCAL_UDP = 14580
+"""PX4's offboard link listens here."""
+PX4_GCS_LOCAL_UDP = 18570
+"""PX4's ground-station link listens here (it sends to 14550)."""
+GCS_UDP = 14550
+"""Where ground stations (QGroundControl) listen."""
+
+SIM_VEHICLE_VIDEO_HTTP = 8080
+"""`dronectl sim-vehicle` / `px4-sim` serve MJPEG on 8080 + N when run by hand (a camera-like port)."""
+
+
+class PortInUseError(OSError):
+    """A port a run needs is held by another program; the message names it."""
+
+
+def free_port(protocol: Protocol = "udp", host: str = LOOPBACK) -> int:
+    """A port on `host` that nobody holds now (the kernel's pick)."""
+    kind = socket.SOCK_DGRAM if protocol == "udp" else socket.SOCK_STREAM
+    with socket.socket(socket.AF_INET, kind) as sock:
+        sock.bind((host, 0))
+        return int(sock.getsockname()[1])
+
+
+def is_free(port: int, protocol: Protocol = "udp", host: str = LOOPBACK) -> bool:
+    """Whether `port` can be bound on `host` now."""
+    kind = socket.SOCK_DGRAM if protocol == "udp" else socket.SOCK_STREAM
+    with socket.socket(socket.AF_INET, kind) as sock:
+        if protocol == "tcp":
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as servers bind: TIME_WAIT is free
+        try:
+            sock.bind((host, port))
+        except OSError as exc:
+            if exc.errno in (errno.EADDRINUSE, errno.EACCES):
+                return False
+            raise
+        return True
+
+
+def check_free(ports: Iterable[tuple[Protocol, int, str]], host: str = LOOPBACK) -> None:
+    """Raise `PortInUseError` naming the first of `ports` ((protocol, port, what it is for)) that is taken."""
+    for protocol, port, what in ports:
+        if not is_free(port, protocol, host):
+            raise PortInUseError(
+                errno.EADDRINUSE,
+                f"{protocol.upper()} port {port} ({what}) is in use by another program; "
+                "free it, or leave the ports to the run (auto)",
+            )
