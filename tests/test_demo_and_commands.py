@@ -6,11 +6,11 @@ from pathlib import Path
 
 import cv2
 import pytest
+from dronectl import bench_cmd, collect_cmd, demo_cmd
 
 from sim_world.collection.demo import DemoConfig, run_demo
 from sim_world.rendering.camera import CameraConfig
 from sim_world.world import WorldConfig
-from tools import bench_cmd, collect_cmd, demo_cmd
 
 
 def test_demo_flies_right_then_left_and_the_target_moves_the_other_way(tmp_path: Path) -> None:

@@ -19,7 +19,7 @@ from pymavlink.dialects.v20 import common as M
 from small_fs import fill, small_filesystem
 
 from controller.missions.report import ReportWriter
-from core.files import CLAIM_MARKER, OutputDirError, claim_dir
+from drone_inspect_core.files import CLAIM_MARKER, OutputDirError, claim_dir
 from flight.relay import INCOMPLETE_SUFFIX, MavlinkRelay
 
 REPO = Path(__file__).resolve().parents[1]
@@ -64,7 +64,7 @@ def test_the_report_writer_keeps_the_outcome_on_a_full_disk(tmp_path: Path) -> N
 def test_a_read_only_or_taken_out_folder_is_one_line_before_anything_starts(tmp_path: Path) -> None:
     with small_filesystem(tmp_path / "ro", 16, read_only=True) as ro:
         done = subprocess.run(
-            [sys.executable, "-m", "tools.dronectl", "fly", "--out", str(ro / "report")],
+            [sys.executable, "-m", "dronectl", "fly", "--out", str(ro / "report")],
             cwd=REPO, capture_output=True, text=True, timeout=60,
         )  # fmt: skip
         assert done.returncode == 2
@@ -83,7 +83,7 @@ def test_a_read_only_or_taken_out_folder_is_one_line_before_anything_starts(tmp_
 
 _CLAIM = """
 import sys, time
-from core.files import OutputDirError, claim_dir
+from drone_inspect_core.files import OutputDirError, claim_dir
 time.sleep(max(0.0, float(sys.argv[2]) - time.time()))
 try:
     claim_dir(sys.argv[1])
@@ -114,7 +114,7 @@ def test_a_sim_mavlink_flight_that_fills_its_disk_lands_and_reports(tmp_path: Pa
     with small_filesystem(tmp_path / "disk", 96) as disk:
         done = subprocess.run(
             [
-                sys.executable, "-m", "tools.dronectl", "fly", "--vehicle", "sim-mavlink",
+                sys.executable, "-m", "dronectl", "fly", "--vehicle", "sim-mavlink",
                 "--sim-speed", "max", "--out", str(disk / "report"),
             ],
             cwd=REPO, capture_output=True, text=True, timeout=240,

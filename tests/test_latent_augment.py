@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from controller.planning.actions import label_from_offset
-from controller.planning.latent.augment import (
+from controller.training.augment import (
     augment,
     colour_jitter,
     geometric,
@@ -17,7 +17,7 @@ from controller.planning.latent.augment import (
     shear,
     sheared_offsets,
 )
-from controller.planning.latent.config import AugmentConfig
+from controller.training.config import AugmentConfig
 
 
 def _disc(size: int, du: float, dv: float) -> torch.Tensor:

@@ -5,11 +5,11 @@ import math
 import pytest
 import torch
 
-from controller.planning.latent.config import LossWeights
-from controller.planning.latent.losses import (
+from controller.planning.latent.model import distance
+from controller.training.config import LossWeights
+from controller.training.losses import (
     consistency_loss,
     directional_loss,
-    distance,
     ranking_loss,
     regularisation_loss,
     total_loss,

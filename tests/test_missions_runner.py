@@ -143,7 +143,7 @@ def test_default_mission_in_process_ends_centred_per_truth(
     tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:
     """`dronectl fly` with no mission: the real world, image detector and shipped latent planner."""
-    from tools import fly_cmd
+    from dronectl import fly_cmd
 
     assert fly_cmd.main(["--out", str(tmp_path)]) == 0
     report = read_report(tmp_path)
@@ -169,7 +169,7 @@ def test_an_epsilon_inside_the_stopping_margin_is_refused_before_the_vehicle_is_
 
 def test_a_report_folder_that_holds_a_flight_is_never_written_over(tmp_path: Path) -> None:
     from controller.missions.runner import run_mission
-    from core.files import OutputDirError
+    from drone_inspect_core.files import OutputDirError
 
     earlier = tmp_path / "earlier"
     earlier.mkdir()

@@ -36,7 +36,7 @@ def _mission_file(tmp_path: Path, fixed_ports: bool = False) -> Path:
 
 def _fly(tmp_path: Path, out: Path, fixed_ports: bool = False) -> subprocess.Popen[str]:
     mission = _mission_file(tmp_path, fixed_ports)
-    command = [sys.executable, "-m", "tools.dronectl", "fly", "--mission", str(mission), "--out", str(out)]
+    command = [sys.executable, "-m", "dronectl", "fly", "--mission", str(mission), "--out", str(out)]
     return subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 

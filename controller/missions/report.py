@@ -29,7 +29,7 @@ from matplotlib.figure import Figure  # the object API: no pyplot state, no GUI 
 from PIL import Image
 
 from controller.planning.loop_records import StepRecord
-from core.files import claim_dir, release_claim, write_atomic, write_json_atomic
+from drone_inspect_core.files import claim_dir, release_claim, write_atomic, write_json_atomic
 from perception.annotate import annotate
 from perception.types import Detection
 
@@ -118,7 +118,8 @@ def timing_summary(steps: list[StepRecord]) -> dict[str, float | None]:
 
 
 def claim_report_dir(out_dir: str | Path) -> Path:
-    """`out_dir` as this flight's own report folder (`core.files.claim_dir`): new, or empty and claimed
+    """`out_dir` as this flight's own report folder (`drone_inspect_core.files.claim_dir`): new, or empty
+    and claimed
     atomically; `OutputDirError` (one line) if it holds anything, another run holds it, or it cannot be
     written. A second flight there would truncate the first one's .tlog and replace its report."""
     return claim_dir(out_dir, "report folder")
@@ -185,7 +186,7 @@ class ReportWriter:
     Recording never costs the flight: a write that fails (a full disk, a read-only or removed folder)
     is said once and stops the per-step rewrites; `finish` still tries the whole report, then one
     without its steps, and names what could not be written in `recording_errors`. A file is only
-    ever replaced whole (`core.files.write_atomic`): no `.tmp` or half-written file is left.
+    ever replaced whole (`drone_inspect_core.files.write_atomic`): no `.tmp` or half-written file is left.
     So that the outcome fits even on a disk the flight filled (its .tlog, mostly), the writer holds
     `reserve_bytes` of ballast (`.reserve`) from the start and frees it before the final report.
     """

@@ -45,7 +45,7 @@ from controller.planning.loop_records import (
     count_refinements,
     count_second_choices,
 )
-from core.centring import default_epsilon_px
+from drone_inspect_core.centring import default_epsilon_px
 from flight.moves import take_off_to_start
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, flight_guard
@@ -306,7 +306,8 @@ def run_mission(
     """Build the mission's kit, fly it and write the report folder `out_dir` (`media`: plot and GIF too).
 
     `out_dir` must not exist or be empty: a report is never written over another
-    (`core.files.OutputDirError`; `claimed`: the caller already claimed it). A mission that cannot
+    (`drone_inspect_core.files.OutputDirError`; `claimed`: the caller already claimed it). A mission that
+    cannot
     start (a bad checkpoint, a camera that does not open, a simulator that fails) still leaves a
     report saying why, then raises.
     """

@@ -7,13 +7,13 @@ from typing import Literal
 
 from pydantic import Field, field_validator
 
-from core.config_files import StrictModel
+from drone_inspect_core.config_files import StrictModel
 
 
 class PortSpec(StrictModel):
     """Ports for a `sim-mavlink` mission: "auto" (the default) takes free ones per run, so any number of
     runs fly at once; a number fixes one (UDP p: the sim-vehicle, p+1: the .tlog relay, p+2: MAVSDK),
-    checked free before anything starts (`core.ports.check_free`)."""
+    checked free before anything starts (`drone_inspect_core.ports.check_free`)."""
 
     mavlink_udp: int | Literal["auto"] = "auto"
     http: int | Literal["auto"] = "auto"

@@ -27,10 +27,9 @@ from controller.missions.schema import (
     MissionFileError,
     load_mission,
 )
-from core.files import release_claim
+from drone_inspect_core.files import release_claim
 
 log = logging.getLogger(__name__)
-
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ import numpy as np
 import pybullet as p
 from pymavlink.dialects.v20 import common as mavlink
 
-from core.frames import enu_to_ned
+from drone_inspect_core.frames import enu_to_ned
 from sim_world.px4_bridge.geodesy import HomePoint
 from sim_world.px4_bridge.link import Px4DisconnectedError, SimulatorServer
 from sim_world.px4_bridge.messages import ActuatorCommand, HilEncoder, RotorMapping

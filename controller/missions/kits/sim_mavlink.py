@@ -26,7 +26,7 @@ from controller.missions.kits.simulated import (
 )
 from controller.missions.schema import Mission, StartOffset
 from controller.missions.setup import start_offset_for
-from core.ports import check_free, free_port
+from drone_inspect_core.ports import check_free, free_port
 from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
 from flight.sim_launcher import SimulatorProcess

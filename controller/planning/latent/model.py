@@ -18,17 +18,28 @@ p(named target in view) = σ(MLP(z_s)).
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from controller.planning.actions import NUM_ACTIONS
 from controller.planning.latent.config import ModelConfig
 from controller.planning.latent.image_encoder import ImageEncoder
-from controller.planning.latent.losses import distance
 from controller.planning.latent.text_encoder import TextEncoder
 
 # (9,) axis indices of every joint action, in Action.index order (index = 3·x + z).
 ACTION_X = torch.arange(NUM_ACTIONS) // 3
 ACTION_Z = torch.arange(NUM_ACTIONS) % 3
+
+
+def distance(a: torch.Tensor, b: torch.Tensor, kind: str) -> torch.Tensor:
+    """D over the last dimension, broadcasting the leading ones: (..., d), (..., d) → (...)."""
+    if kind == "cosine":
+        return 1.0 - F.cosine_similarity(a, b, dim=-1, eps=1e-8)
+    if kind == "euclidean":
+        return torch.linalg.vector_norm(a - b, dim=-1)
+    if kind == "both":
+        return 1.0 - F.cosine_similarity(a, b, dim=-1, eps=1e-8) + torch.linalg.vector_norm(a - b, dim=-1)
+    raise ValueError(f"unknown distance {kind!r}; choose cosine, euclidean or both")
 
 
 class LatentDynamicsModel(nn.Module):

@@ -1,0 +1,181 @@
+"""`dronectl fly`: fly one centring mission and write its report folder.
+
+With no arguments it flies `missions/default.yaml` in the in-process simulation
+with the shipped latent planner checkpoint:
+
+    dronectl fly
+    dronectl fly --mission missions/sector_ne.yaml --planner classic --out runs/fly/ne
+    dronectl fly --seed 7 --epsilon-px 6
+
+Real PX4 firmware (SITL) flying the simulated world: `--vehicle px4-sitl --px4 DIR`
+(DIR: a PX4 SITL build folder, default $PX4_SITL_DIR).
+
+A real vehicle: a mission file with `vehicle: udpin://0.0.0.0:14540` and
+`camera: http://<drone>:8080/stream.mjpg` (or the same as --vehicle/--camera).
+Exit status 0 when the mission's expectations hold, 1 when they do not, 2 on a
+bad mission file or option.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from controller.missions.results import MissionResult
+from controller.missions.schema import (
+    PLANNER_NAMES,
+    PX4_SITL,
+    Mission,
+    MissionFileError,
+    Px4Spec,
+    load_mission,
+)
+from drone_inspect_core.files import OutputDirError
+
+DEFAULT_MISSION = Path(__file__).resolve().parents[2] / "missions" / "default.yaml"
+
+
+def _overrides(args: argparse.Namespace) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key in ("planner", "checkpoint", "epsilon_px", "max_steps", "vehicle", "camera", "sim_speed"):
+        value = getattr(args, key)
+        if value is not None:
+            out[key] = value
+    return out
+
+
+def _px4_options(mission: Mission, args: argparse.Namespace) -> Mission:
+    """Apply --px4 / --px4-speed (px4-sitl only), resolving the PX4 folder now: a bad one is named at once."""
+    if mission.vehicle != PX4_SITL and args.px4 is None and args.px4_speed is None:
+        return mission
+    from sim_world.px4_bridge.px4_process import find_px4_dir  # the simulator only when it is flown
+
+    if args.px4 is None and args.px4_speed is None:
+        if mission.vehicle == PX4_SITL:
+            find_px4_dir(mission.px4.dir)
+        return mission
+    if mission.vehicle != PX4_SITL:
+        raise ValueError(
+            f"--px4 and --px4-speed go with --vehicle px4-sitl (the vehicle is {mission.vehicle!r})"
+        )
+    update: dict[str, Any] = {}
+    if args.px4 is not None or mission.px4.dir is not None:
+        update["dir"] = str(find_px4_dir(args.px4 if args.px4 is not None else mission.px4.dir))
+    if args.px4_speed is not None:
+        update["speed"] = args.px4_speed if args.px4_speed == "max" else float(args.px4_speed)
+    px4 = Px4Spec.model_validate({**mission.px4.model_dump(), **update})
+    return mission.model_copy(update={"px4": px4})
+
+
+def summary_lines(result: MissionResult) -> list[str]:
+    """The few lines a person wants after a flight."""
+    verdict = "PASS" if result.passed else "FAIL"
+    outcome = result.outcome.replace("_", " ")
+    refined = f", {result.refinement_moves} of them boundary refinement" if result.refinement_moves else ""
+    if result.second_choice_moves:
+        refined += f", {result.second_choice_moves} on the planner's second choice"
+    lines = [
+        f"{verdict}  {result.name}: {outcome} after {result.steps} steps "
+        f"({result.moves} moves{refined}; {result.vehicle_s:.1f} s of flight)"
+    ]
+    truth, det = result.final_truth_offset_px, result.final_detector_offset_px
+    parts = []
+    if truth is not None:
+        parts.append(f"truth ({truth[0]:+.1f}, {truth[1]:+.1f}) px")
+    if det is not None:
+        parts.append(f"detector ({det[0]:+.1f}, {det[1]:+.1f}) px")
+    lines.append(
+        f"      final offset: {', '.join(parts) or 'target not in view'}; ε = {result.epsilon_px:g} px"
+    )
+    if result.overhead_ms_mean is not None:
+        lines.append(f"      loop overhead: {result.overhead_ms_mean:.1f} ms per step (besides the move)")
+    lines += [f"      - {failure}" for failure in result.failures]
+    lines += [f"      not recorded: {error}" for error in result.recording_errors]
+    if result.report_dir and result.report_written:
+        extra = [name for key, name in result.files.items() if name and key != "report"]
+        also = f" (+ {', '.join(extra)})" if extra else ""
+        lines.append(f"      report: {Path(result.report_dir) / 'report.json'}{also}")
+    elif result.report_dir:
+        lines.append(f"      report: could not be written in {result.report_dir} (the outcome is above)")
+    return lines
+
+
+def main(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(prog="dronectl fly", description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--mission", type=Path, default=DEFAULT_MISSION, help="mission YAML (default: %(default)s)"
+    )
+    parser.add_argument("--planner", choices=PLANNER_NAMES, help="override the mission's planner")
+    parser.add_argument("--checkpoint", help="latent planner checkpoint folder (default: the shipped one)")
+    parser.add_argument("--seed", type=int, help="override the scene seed (and a random start's seed)")
+    parser.add_argument("--epsilon-px", type=float, help="override ε, pixels")
+    parser.add_argument("--max-steps", type=int, help="override the step budget")
+    parser.add_argument("--vehicle", help="override the vehicle: sim, sim-mavlink, px4-sitl or a MAVLink URL")
+    parser.add_argument("--px4", type=Path, help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
+    parser.add_argument(
+        "--px4-speed",
+        help="px4-sitl: simulated seconds per wall second, or 'max' (default: the mission's, 1)",
+    )
+    parser.add_argument(
+        "--sim-speed",
+        help="sim-mavlink: the sim-vehicle's simulated seconds per wall second, or 'max' (default: the "
+        "mission's, 1)",
+    )
+    parser.add_argument("--camera", help="override the camera: sim or a stream URL")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        help="report folder; must be new or empty: a report is never written over another "
+        "(default: a fresh runs/fly/<mission>-<time>)",
+    )
+    parser.add_argument(
+        "--rerun",
+        type=Path,
+        metavar="FILE.rrd",
+        help="also record the flight for the Rerun viewer (a new file; needs the [rerun] extra)",
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="log every module's progress")
+    args = parser.parse_args(argv)
+    if not args.verbose:
+        logging.getLogger().setLevel(logging.WARNING)
+        logging.getLogger("flight.mavsdk_backend").setLevel(logging.INFO)  # what a wait is waiting for
+    try:
+        mission = load_mission(args.mission, _overrides(args))
+        if args.seed is not None:
+            mission = mission.with_seed(args.seed)
+        mission = _px4_options(mission, args)
+    except (MissionFileError, ValueError) as exc:
+        print(f"dronectl fly: {exc}", file=sys.stderr)
+        return 2
+    from controller.missions.report import claim_report_dir, fresh_report_dir
+    from controller.missions.runner import run_mission
+
+    if args.rerun is not None:
+        from controller.missions.rerun_log import RerunFileError, RerunUnavailableError, check_rerun_path
+
+        try:
+            check_rerun_path(args.rerun)
+        except (RerunFileError, RerunUnavailableError) as exc:
+            print(f"dronectl fly: {exc}", file=sys.stderr)
+            return 2
+    default_out = Path("runs") / "fly" / f"{mission.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    try:
+        out = claim_report_dir(args.out or fresh_report_dir(default_out))
+    except OutputDirError as exc:
+        print(f"dronectl fly: --out {exc}", file=sys.stderr)
+        return 2
+    print(f"flying {mission.name} ({mission.vehicle}, planner {mission.planner}) ...", flush=True)
+    try:
+        result = run_mission(mission, out, rerun_path=args.rerun, claimed=True)
+    except Exception as exc:  # could not start: a clear line, not a traceback
+        print(f"dronectl fly: {mission.name} could not start: {type(exc).__name__}: {exc}", file=sys.stderr)
+        print(f"      report: {out / 'report.json'} (why it did not start)", file=sys.stderr)
+        return 1
+    print("\n".join(summary_lines(result)))
+    if args.rerun is not None and args.rerun.exists():
+        print(f"      rerun: {args.rerun} (open it with `rerun {args.rerun}`)")
+    return 0 if result.passed else 1
