@@ -29,7 +29,7 @@ from typing import Any, TextIO
 import cv2
 import numpy as np
 
-from drone_inspect_core.targets import colour_name
+from drone_inspect_core.vocabulary import colour_name
 
 logger = logging.getLogger(__name__)
 

@@ -13,7 +13,7 @@ from controller.missions.schema import MissionFileError, load_mission, parse_mis
 from controller.missions.setup import scene_config_for
 from controller.planning.grounding import parse_instruction
 from controller.planning.loop_records import Outcome
-from drone_inspect_core.targets import colour_name
+from drone_inspect_core.vocabulary import colour_name
 from sim_world.scene.config import DEFAULT_SCENE
 from sim_world.scene.sampling import sample_scene
 

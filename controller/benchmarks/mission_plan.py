@@ -26,7 +26,7 @@ import numpy as np
 from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission, parse_mission
 from controller.training.instructions import builtin_templates
 from controller.training.phrasing import TargetName, describe
-from drone_inspect_core.targets import ATTRIBUTE_COLOURS, TARGET_KINDS, colour_name
+from drone_inspect_core.vocabulary import colour_name, shipped_vocabulary
 
 ABSENT_TAG = "absent"
 """The tag of a benchmark mission whose instruction names a target the scene does not hold."""
@@ -191,11 +191,12 @@ def _absent_name(targets: list[tuple[str, str]], rng: np.random.Generator, with_
     instruction always names one), else a kind with a colour no target of it has."""
     rng.random()  # the draw that chose "absent"
     kinds = {kind for kind, _ in targets}
-    missing = [k for k in TARGET_KINDS if k not in kinds]
+    missing = [k for k in shipped_vocabulary().kind_names if k not in kinds]
     if missing:
         kind = missing[int(rng.integers(len(missing)))]
-        colours = tuple(ATTRIBUTE_COLOURS)
+        colours = shipped_vocabulary().colour_names
         return TargetName(kind, colours[int(rng.integers(len(colours)))] if with_colour else None)
-    kind = TARGET_KINDS[int(rng.integers(len(TARGET_KINDS)))]
-    free = [c for c in ATTRIBUTE_COLOURS if (kind, c) not in targets]
+    kinds_known = shipped_vocabulary().kind_names
+    kind = kinds_known[int(rng.integers(len(kinds_known)))]
+    free = [c for c in shipped_vocabulary().colour_names if (kind, c) not in targets]
     return TargetName(kind, free[int(rng.integers(len(free)))])

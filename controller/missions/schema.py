@@ -9,7 +9,8 @@ traceback from inside pydantic or PyYAML.
 name: sector-ne                  # required; used for the report folder
 tags: [sector, quick]
 scene: {seed: 1001}              # or {config: scenes/x.yaml, seed: 3}, or {config: {...inline...}, seed: 3}
-target_kind: gauge               # gauge | valve | switchbox | null (the scene draws one)
+kinds: {}                        # your own: {flange: {image: f.png, size_m: [0.3, 0.3], words: [flange]}}
+target_kind: gauge               # gauge | valve | switchbox | a kind of yours | null (the scene draws one)
 targets: 1                       # 1..4 targets on the wall, the named one included
 twins: false                     # one other target of the named kind, in another trim colour (targets >= 2)
 target_attribute: null           # the named target's trim colour: black | grey | red | blue | yellow | null
@@ -50,6 +51,7 @@ from pydantic import (
     Discriminator,
     Field,
     Tag,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
@@ -58,13 +60,18 @@ from controller.missions.schema_specs import FaultSpec, PortSpec, Px4Spec
 from controller.planning.grounding import parse_instruction
 from drone_inspect_core.config_files import ConfigFileError, Range, StrictModel, read_yaml, validate_mapping
 from drone_inspect_core.sim_speed import parse_sim_speed
-from drone_inspect_core.targets import ATTRIBUTE_COLOURS
+from drone_inspect_core.vocabulary import (
+    Vocabulary,
+    VocabularyError,
+    parse_kinds,
+    shipped_vocabulary,
+    validated_kinds,
+)
 from flight.errors import ConnectionUrlError
 from flight.urls import validate_connection_url
 
 PlannerName = Literal["latent", "classic", "random", "oracle"]
 PLANNER_NAMES: tuple[str, ...] = ("latent", "classic", "random", "oracle")
-TargetKindName = Literal["gauge", "valve", "switchbox"]
 DetectorName = Literal["image", "truth"]
 OutcomeName = Literal["centred", "max_steps", "timeout", "target_lost", "target_not_found", "planner_stalled"]
 
@@ -206,14 +213,18 @@ class Mission(StrictModel):
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
     tags: tuple[str, ...] = ()
     description: str = ""
+    kinds: dict[str, dict[str, Any]] = Field(default_factory=dict)
+    """Target kinds the mission adds (`drone_inspect_core.vocabulary.parse_kind`; images relative to the
+    mission file): the scene may draw them, the instruction may name them."""
     scene: SceneSpec = SceneSpec()
-    target_kind: TargetKindName | None = None
+    target_kind: str | None = None
+    """The named target's kind (shipped, or the mission's or its inline scene's own); None: drawn."""
     targets: int = Field(default=1, ge=1, le=4)
     """Targets on the wall, the named one (the one to centre) included."""
     twins: bool = False
     """One other target has the named target's kind, in another trim colour (needs targets >= 2)."""
     target_attribute: str | None = None
-    """The named target's trim colour (a name of `drone_inspect_core.targets.ATTRIBUTE_COLOURS`);
+    """The named target's trim colour (a colour name of `drone_inspect_core.vocabulary`);
     None: drawn."""
     start: Start = StartOffset()
     instruction: str | None = None
@@ -248,12 +259,34 @@ class Mission(StrictModel):
     def _sim_speed(cls, value: float | str) -> float | str:
         return parse_sim_speed(value)
 
+    @field_validator("kinds", mode="before")
+    @classmethod
+    def _kinds(cls, value: object, info: ValidationInfo) -> object:
+        return validated_kinds(value, (info.context or {}).get("base_dir"))
+
     @field_validator("target_attribute")
     @classmethod
     def _known_colour(cls, value: str | None) -> str | None:
-        if value is not None and value not in ATTRIBUTE_COLOURS:
-            raise ValueError(f"must be one of {', '.join(ATTRIBUTE_COLOURS)} or null, got {value!r}")
+        colours = shipped_vocabulary().colour_names
+        if value is not None and value not in colours:
+            raise ValueError(f"must be one of {', '.join(colours)} or null, got {value!r}")
         return value
+
+    @property
+    def vocabulary(self) -> Vocabulary:
+        """The shipped vocabulary, with the kinds of an inline scene config and of the mission itself (a
+        scene file's own kinds join when the scene is built: `controller.missions.setup`)."""
+        inline = self.scene.config.get("kinds") if isinstance(self.scene.config, dict) else None
+        return shipped_vocabulary().with_kinds(parse_kinds(inline)).with_kinds(parse_kinds(self.kinds))
+
+    @model_validator(mode="after")
+    def _known_kind(self) -> Mission:
+        if self.target_kind is not None and not isinstance(self.scene.config, str):
+            try:
+                self.vocabulary.kind(self.target_kind)
+            except VocabularyError as exc:
+                raise ValueError(f"target_kind: {exc}") from None
+        return self
 
     @model_validator(mode="after")
     def _named_target(self) -> Mission:
@@ -263,7 +296,7 @@ class Mission(StrictModel):
                 f"twins: needs targets >= 2 (the named one and its twin), got targets {self.targets}"
             )
         if self.instruction is not None and (self.twins or self.target_attribute is not None):
-            named = parse_instruction(self.instruction).attribute
+            named = parse_instruction(self.instruction, self.vocabulary).attribute
             if named is None and self.twins:
                 raise ValueError(
                     f"instruction: {self.instruction!r} names no colour, but the scene has twins "
@@ -373,7 +406,10 @@ def parse_mission(
     if not isinstance(data, dict):
         kind = type(data).__name__
         raise MissionFileError(source, None, f"expected a mapping at the top level, got {kind}")
-    return validate_mapping(Mission, {**data, **(overrides or {})}, source, MissionFileError, _UNNAMED)
+    base_dir = Path(source).parent if isinstance(source, Path) else None
+    return validate_mapping(
+        Mission, {**data, **(overrides or {})}, source, MissionFileError, _UNNAMED, {"base_dir": base_dir}
+    )
 
 
 def load_mission(path: str | Path, overrides: dict[str, Any] | None = None) -> Mission:
@@ -382,7 +418,11 @@ def load_mission(path: str | Path, overrides: dict[str, Any] | None = None) -> M
     data = read_yaml(path, MissionFileError)
     mission = parse_mission(data, path)  # the file alone first: its own errors name the file
     if overrides:  # then the command line's changes, whose errors name the command line
-        mission = parse_mission(data, f"command-line options over {path}", overrides)
+        source = f"command-line options over {path}"
+        base_dir = path.parent
+        mission = validate_mapping(
+            Mission, {**data, **overrides}, source, MissionFileError, _UNNAMED, {"base_dir": base_dir}
+        )
     if isinstance(mission.scene.config, str) and not Path(mission.scene.config).is_absolute():
         # A scene file is found relative to the mission file, so a suite folder can be moved as a whole.
         resolved = (path.parent / mission.scene.config).resolve()
