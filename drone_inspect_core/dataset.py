@@ -63,7 +63,11 @@ _ROW_FIELDS: dict[str, type | tuple[type, ...]] = {
     "offset_m": dict,
     "scene": dict,
 }
-_TARGET_FIELDS: dict[str, type | tuple[type, ...]] = {"kind": str, "attribute": str, **_TRUTH_FIELDS}
+_TARGET_FIELDS: dict[str, type | tuple[type, ...]] = {
+    "kind": str,
+    "attribute": (str, type(None)),  # None: a target with no trim to name (a picture face)
+    **_TRUTH_FIELDS,
+}
 """Each entry of a row's optional `targets` list."""
 _META_FIELDS = ("generator_version", "seed", "camera", "scene_config", "counts")
 
@@ -151,7 +155,7 @@ def _check_targets(row: dict[str, Any], where: str) -> None:
         missing = sorted({"target_attribute", "named", "targets"} - set(present))
         raise DatasetError(f"{where}: field {missing[0]!r} missing beside {present}")
     targets, named = row["targets"], row["named"]
-    if not isinstance(row["target_attribute"], str):
+    if not isinstance(row["target_attribute"], str | None):
         raise DatasetError(f"{where}: field 'target_attribute' has the wrong type")
     if not isinstance(targets, list) or not targets:
         raise DatasetError(f"{where}: field 'targets' must be a non-empty list")

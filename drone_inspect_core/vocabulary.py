@@ -15,12 +15,14 @@ words, which the model never heard). `words` is all of them: what the parser acc
 from __future__ import annotations
 
 import functools
+import json
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import cv2
 import yaml
 
 BUILTIN_MODELS: tuple[str, ...] = ("gauge", "valve", "switchbox")
@@ -191,6 +193,8 @@ def _face(value: Any, base_dir: Path | None, where: str) -> Face:
         raise VocabularyError(f"{where}.image: {image} is not a {'/'.join(IMAGE_SUFFIXES)} file")
     if not image.is_file():
         raise VocabularyError(f"{where}.image: no such file {image}")
+    if not _readable_image(image.resolve(), image.stat().st_mtime_ns):
+        raise VocabularyError(f"{where}.image: {image} is not a readable image")
     size = value.get("size_m")
     if (
         not isinstance(size, list | tuple)
@@ -202,6 +206,12 @@ def _face(value: Any, base_dir: Path | None, where: str) -> Face:
             f"{where}.size_m: expected [width, height] in metres, each 0.02..3, got {size!r}"
         )
     return Face(image=image.resolve(), size_m=(float(size[0]), float(size[1])))
+
+
+@functools.lru_cache(maxsize=64)
+def _readable_image(path: Path, mtime_ns: int) -> bool:
+    """Whether OpenCV decodes `path` (cached per file version: scenes ask often)."""
+    return cv2.imread(str(path), cv2.IMREAD_COLOR) is not None
 
 
 def parse_kind(name: str, data: Any, base_dir: Path | None = None, where: str = "kinds") -> TargetKind:
@@ -319,3 +329,18 @@ def validated_kinds(value: Any, base_dir: Path | None, where: str = "kinds") -> 
     except VocabularyError as exc:
         raise ValueError(str(exc).removeprefix(where + ".")) from None
     return {name: kind_mapping(kind) for name, kind in kinds.items()}
+
+
+def vocabulary_with(*kinds: Mapping[str, Any]) -> Vocabulary:
+    """The shipped vocabulary with the `kinds:` sections given (as `validated_kinds` stores them), in order;
+    the same sections give the same object (cached: scenes ask for it per target they draw)."""
+    key = json.dumps([dict(k) for k in kinds], sort_keys=True)
+    return _vocabulary_with(key)
+
+
+@functools.lru_cache(maxsize=64)
+def _vocabulary_with(key: str) -> Vocabulary:
+    vocabulary = shipped_vocabulary()
+    for section in json.loads(key):
+        vocabulary = vocabulary.with_kinds(parse_kinds(section))
+    return vocabulary

@@ -63,9 +63,9 @@ from drone_inspect_core.sim_speed import parse_sim_speed
 from drone_inspect_core.vocabulary import (
     Vocabulary,
     VocabularyError,
-    parse_kinds,
     shipped_vocabulary,
     validated_kinds,
+    vocabulary_with,
 )
 from flight.errors import ConnectionUrlError
 from flight.urls import validate_connection_url
@@ -277,7 +277,7 @@ class Mission(StrictModel):
         """The shipped vocabulary, with the kinds of an inline scene config and of the mission itself (a
         scene file's own kinds join when the scene is built: `controller.missions.setup`)."""
         inline = self.scene.config.get("kinds") if isinstance(self.scene.config, dict) else None
-        return shipped_vocabulary().with_kinds(parse_kinds(inline)).with_kinds(parse_kinds(self.kinds))
+        return vocabulary_with(inline or {}, self.kinds)
 
     @model_validator(mode="after")
     def _known_kind(self) -> Mission:

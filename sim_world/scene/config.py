@@ -22,7 +22,7 @@ from drone_inspect_core.config_files import (
     read_yaml,
     validate_mapping,
 )
-from drone_inspect_core.vocabulary import Vocabulary, parse_kinds, shipped_vocabulary, validated_kinds
+from drone_inspect_core.vocabulary import Vocabulary, shipped_vocabulary, validated_kinds, vocabulary_with
 
 WallTexture = Literal["concrete", "brick", "painted_metal"]
 FloorTexture = Literal["concrete", "tiles", "grating"]
@@ -267,7 +267,7 @@ class SceneConfig(StrictModel):
     @property
     def vocabulary(self) -> Vocabulary:
         """The shipped vocabulary with this scene's own kinds."""
-        return shipped_vocabulary().with_kinds(parse_kinds(self.kinds))
+        return vocabulary_with(self.kinds)
 
 
 DEFAULT_SCENE = SceneConfig()
