@@ -67,6 +67,7 @@ def loop_config(
     mission: Mission, epsilon_px: float, instruction: str, target: TargetQuery | None = None
 ) -> CentringConfig:
     return CentringConfig(
+        **mission.loop.model_dump(),
         epsilon_px=epsilon_px,
         instruction=instruction,
         target=target,
@@ -74,7 +75,6 @@ def loop_config(
         timeout_s=mission.timeout_s,
         stop_margin_px=mission.stop_margin_px,
         **({"fresh_frame_s": FAST_SIM_FRESH_FRAME_S} if mission.sim_speed != 1.0 else {}),
-        **mission.loop.as_kwargs(),
     )
 
 
@@ -244,7 +244,7 @@ def _finish(
     return MissionResult(
         name=mission.name,
         planner=kit.planner.name,
-        outcome=outcome.value,
+        outcome=outcome,
         passed=not failures,
         failures=tuple(failures),
         steps=n_steps,

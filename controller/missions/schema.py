@@ -27,7 +27,7 @@ stop_margin_px: null             # stop at ε − this per detector; null: 2 px 
 max_steps: 20
 timeout_s: 120
 wind: {mean_enu_m_s: [0.3, 0, 0], gust_std_m_s: 0.2}
-loop: {max_move_m: 1.0}          # CentringConfig overrides (move scheme, refinement budget, ...)
+loop: {max_move_m: 1.0}          # the loop's settings (move scheme, refinement budget, ...): LoopSettings
 expect: {outcome: centred, max_steps: 12, final_offset_px: 10}
 sim_speed: 1.0                   # vehicle: sim-mavlink only: simulated s per wall s, or max
 px4: {instance: auto, speed: 1.0}  # vehicle: px4-sitl only (the PX4 folder: --px4 or $PX4_SITL_DIR)
@@ -58,6 +58,8 @@ from pydantic import (
 
 from controller.missions.schema_specs import FaultSpec, PortSpec, Px4Spec
 from controller.planning.grounding import parse_instruction
+from controller.planning.loop_records import LoopSettings, Outcome
+from controller.planning.planners import PLANNERS, PlannerName
 from drone_inspect_core.config_files import ConfigFileError, Range, StrictModel, read_yaml, validate_mapping
 from drone_inspect_core.sim_speed import parse_sim_speed
 from drone_inspect_core.vocabulary import (
@@ -70,10 +72,7 @@ from drone_inspect_core.vocabulary import (
 from flight.errors import ConnectionUrlError
 from flight.urls import validate_connection_url
 
-PlannerName = Literal["latent", "classic", "random", "oracle"]
-PLANNER_NAMES: tuple[str, ...] = ("latent", "classic", "random", "oracle")
 DetectorName = Literal["image", "truth"]
-OutcomeName = Literal["centred", "max_steps", "timeout", "target_lost", "target_not_found", "planner_stalled"]
 
 SIM = "sim"
 SIM_MAVLINK = "sim-mavlink"
@@ -171,29 +170,6 @@ class WindSpec(StrictModel):
     gust_time_constant_s: float = Field(default=2.0, gt=0.0)
 
 
-class LoopOverrides(StrictModel):
-    """Overrides of `controller.planning.loop.CentringConfig` (unset fields keep its defaults)."""
-
-    move_m: float | None = Field(default=None, gt=0.0, le=2.0)
-    min_move_m: float | None = Field(default=None, gt=0.0, le=2.0)
-    shrink: float | None = Field(default=None, gt=0.0, le=1.0)
-    speed_m_s: float | None = Field(default=None, gt=0.0, le=2.0)
-    settle_s: float | None = Field(default=None, ge=0.0, le=5.0)
-    max_stalls: int | None = Field(default=None, ge=1, le=20)
-    lost_recoveries: int | None = Field(default=None, ge=0, le=5)
-    not_found_rereads: int | None = Field(default=None, ge=0, le=50)
-    max_refinements: int | None = Field(default=None, ge=0, le=20)
-    max_second_choices: int | None = Field(default=None, ge=0, le=20)
-    scale_moves: bool | None = None
-    max_move_m: float | None = Field(default=None, gt=0.0, le=3.0)
-    move_gain: float | None = Field(default=None, gt=0.0, le=2.0)
-    assumed_distance_m: float | None = Field(default=None, gt=0.0, le=20.0)
-    hfov_deg: float | None = Field(default=None, gt=0.0, lt=180.0)
-
-    def as_kwargs(self) -> dict[str, Any]:
-        return {k: v for k, v in self.model_dump().items() if v is not None}
-
-
 class Expectations(StrictModel):
     """What must hold when the loop ends; an unset limit is not checked.
 
@@ -201,7 +177,7 @@ class Expectations(StrictModel):
     image centre per simulator truth (per the detector where there is no truth).
     """
 
-    outcome: OutcomeName = "centred"
+    outcome: Outcome = Outcome.CENTRED
     max_steps: int | None = Field(default=None, ge=0)
     final_offset_px: float | None = Field(default=None, gt=0.0)
     """The final truth offset, max(|du|, |dv|), must not exceed this."""
@@ -245,7 +221,8 @@ class Mission(StrictModel):
     timeout_s: float = Field(default=120.0, gt=0.0)
     takeoff_altitude_m: float = Field(default=1.5, gt=0.3, le=4.0)
     wind: WindSpec | None = None
-    loop: LoopOverrides = LoopOverrides()
+    loop: LoopSettings = LoopSettings()
+    """How the centring loop moves and waits (`controller.planning.loop_records.LoopSettings`)."""
     expect: Expectations = Expectations()
     ports: PortSpec = PortSpec()
     sim_speed: float | Literal["max"] = 1.0
@@ -364,8 +341,10 @@ class Mission(StrictModel):
             raise ValueError("faults.gust_m_s: only a simulated world has wind to make gusty")
         if self.vehicle != PX4_SITL and "px4" in self.model_fields_set:
             raise ValueError(f"px4: only a 'px4-sitl' mission runs PX4 SITL (vehicle is {self.vehicle!r})")
-        if self.is_real and self.planner == "oracle":
-            raise ValueError("planner: 'oracle' needs simulator truth, which a real vehicle does not have")
+        if self.is_real and PLANNERS[self.planner].needs_truth:
+            raise ValueError(
+                f"planner: {self.planner!r} needs simulator truth, which a real vehicle does not have"
+            )
         return self
 
     @property

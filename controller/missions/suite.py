@@ -27,6 +27,7 @@ from controller.missions.schema import (
     MissionFileError,
     load_mission,
 )
+from controller.planning.loop_records import Outcome
 from drone_inspect_core.files import release_claim
 
 log = logging.getLogger(__name__)
@@ -105,7 +106,7 @@ def failed_to_start(mission: Mission, error: str, wall_s: float) -> MissionResul
     return MissionResult(
         name=mission.name,
         planner=mission.planner,
-        outcome="error",
+        outcome=Outcome.ERROR,
         passed=False,
         failures=(f"error: {error}",),
         steps=0,

@@ -14,6 +14,7 @@ import json
 import logging
 import sys
 from pathlib import Path
+from typing import Any
 
 from controller.benchmarks.fault_matrix import format_markdown, run_fault_matrix
 from controller.benchmarks.missions import BenchmarkConfig
@@ -32,10 +33,12 @@ def main(argv: list[str]) -> int:
     args = parser.parse_args(argv)
     logging.getLogger().setLevel(logging.WARNING)
     try:
-        base = BenchmarkConfig(
-            n=args.n, seed=args.seed, planners=(args.planner,), vehicle=args.vehicle, parallel=args.parallel,
-            px4_dir=args.px4,
-        )  # fmt: skip
+        mission: dict[str, Any] = {"vehicle": args.vehicle}
+        if args.vehicle == "px4-sitl":
+            mission["px4"] = {"dir": args.px4, "speed": "max", "keep_ulog": False}
+        base = BenchmarkConfig.of(
+            mission, n=args.n, seed=args.seed, planners=(args.planner,), parallel=args.parallel
+        )
     except ValueError as exc:
         parser.error(str(exc))
     rows = run_fault_matrix(base)

@@ -27,13 +27,13 @@ from typing import Any
 
 from controller.missions.results import MissionResult
 from controller.missions.schema import (
-    PLANNER_NAMES,
     PX4_SITL,
     Mission,
     MissionFileError,
     Px4Spec,
     load_mission,
 )
+from controller.planning.planners import PLANNER_NAMES
 from drone_inspect_core.files import OutputDirError
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[2] / "missions" / "default.yaml"

@@ -14,8 +14,9 @@ import time
 from pathlib import Path
 
 from controller.missions.report import fresh_report_dir
-from controller.missions.schema import PLANNER_NAMES, MissionFileError
+from controller.missions.schema import MissionFileError
 from controller.missions.suite import SuiteOptions, format_table, run_suite, write_junit
+from controller.planning.planners import PLANNER_NAMES
 from drone_inspect_core.files import OutputDirError
 
 
