@@ -2,7 +2,7 @@
 
 - `find_sitl_dir`: a SITL folder from an option, else an environment variable, else defaults; the
   error names every place looked at and why each was refused;
-- `set_parent_death_signal`: for `subprocess.Popen(preexec_fn=...)`, SIGTERM to the child when the
+- `set_parent_death_signal`: for `subprocess.Popen(preexec_fn=...)`, a signal to the child when the
   process that started it dies, however it dies (SIGKILL included): no autopilot outlives its bridge;
 - `instance_lock`: hold an instance number (its ports) for a block: a lock file per number, so
   parallel runs and test workers never share ports; `auto` takes the lowest free one.
@@ -24,11 +24,11 @@ from typing import IO
 _PR_SET_PDEATHSIG = 1
 
 
-def set_parent_death_signal() -> None:
-    """In the child before exec: SIGTERM when the parent dies (Linux; a no-op elsewhere)."""
+def set_parent_death_signal(signum: int = signal.SIGTERM) -> None:
+    """In the child before exec: `signum` when the parent dies (Linux; a no-op elsewhere)."""
     try:
         libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+        libc.prctl(_PR_SET_PDEATHSIG, signum, 0, 0, 0)
     except (OSError, AttributeError):
         pass
 
