@@ -1,5 +1,5 @@
 """The mission file's sections about where and how a simulated or relayed flight runs: ports, PX4
-SITL, injected faults (`controller.missions.schema` re-exports them)."""
+SITL, ArduPilot SITL, injected faults (`controller.missions.schema` re-exports them)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,10 @@ from typing import Literal
 from pydantic import Field, field_validator
 
 from core.config_files import StrictModel
+
+AutopilotName = Literal["auto", "px4", "ardupilot"]
+"""A MAVLink URL's autopilot (`Mission.autopilot`): "auto" (told by its HEARTBEAT), "px4" (flown with MAVSDK)
+or "ardupilot" (flown in GUIDED mode, `flight.ardupilot_backend`)."""
 
 
 class PortSpec(StrictModel):
@@ -81,3 +85,36 @@ class FaultSpec(StrictModel):
     @property
     def any(self) -> bool:
         return bool(self.link or self.camera or self.gust_m_s or self.vehicle_dies_at_s is not None)
+
+
+class ArduPilotSpec(StrictModel):
+    """How an `ardupilot-sitl` mission runs ArduCopter SITL (see `sim_world.ardupilot_bridge`)."""
+
+    dir: str | None = None
+    """ArduCopter SITL folder; None: `--ardupilot`, else $ARDUPILOT_SITL_DIR, else ../shared/ardupilot-sitl"""
+    instance: int | Literal["auto"] = "auto"
+    """ArduPilot instance 0..9 (ports 9002+10N, 5760+10N); "auto": the lowest one no other run holds."""
+    speed: float | Literal["max"] = 1.0
+    """Simulated seconds per wall second, or "max" (lockstep as fast as it goes; benchmarks)."""
+    noise: float = Field(default=1.0, ge=0.0, le=10.0)
+    """Scale of the IMU noise and bias the bridge adds (0: none; ArduPilot simulates GPS, baro, compass)."""
+    keep_logs: bool = True
+    """Copy ArduPilot's .BIN flight logs into the report folder (`ardupilot/`); ~1 MB per simulated min."""
+    params: dict[str, float] = Field(default_factory=dict)
+    """ArduPilot parameters set at boot over the airframe's own (`WPNAV_SPEED: 300`)."""
+    hold_mode: Literal["BRAKE", "LOITER"] = "BRAKE"
+    """The mode that holds after takeoff and outside offboard (LOITER follows the pilot's throttle)."""
+
+    @field_validator("instance")
+    @classmethod
+    def _instance_range(cls, value: int | str) -> int | str:
+        if isinstance(value, int) and not 0 <= value <= 9:
+            raise ValueError(f"must be 0..9 or 'auto', got {value}")
+        return value
+
+    @field_validator("speed")
+    @classmethod
+    def _speed_range(cls, value: float | str) -> float | str:
+        if isinstance(value, float) and not 0.05 <= value <= 100.0:
+            raise ValueError(f"must be in [0.05, 100] or 'max', got {value:g}")
+        return value
