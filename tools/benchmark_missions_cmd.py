@@ -26,7 +26,9 @@ from controller.missions.report import ReportFolderError
 from controller.missions.schema import FaultSpec
 from core.parallel import RayUnavailableError, add_ray_option
 from core.sim_speed import parse_sim_speed
+from sim_world.ardupilot_bridge.ardupilot_process import ArduPilotFolderError
 from sim_world.px4_bridge.px4_process import Px4FolderError, find_px4_dir
+from tools.ardupilot_options import add_ardupilot_options, resolve_ardupilot_dir
 
 
 def faults_from_args(args: argparse.Namespace) -> dict[str, Any] | None:
@@ -72,13 +74,14 @@ def main(argv: list[str]) -> int:
     parser.add_argument(
         "--vehicle",
         default="sim",
-        choices=("sim", "sim-mavlink", "px4-sitl"),
-        help="in-process, the sim-vehicle over MAVLink, or real PX4 SITL flying the world",
+        choices=("sim", "sim-mavlink", "px4-sitl", "ardupilot-sitl"),
+        help="in-process, the sim-vehicle over MAVLink, or real PX4 / ArduPilot SITL flying the world",
     )
     parser.add_argument("--px4", help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
     parser.add_argument(
         "--px4-speed", default="max", help="px4-sitl: simulation speed, a factor or 'max' (default: max)"
     )
+    add_ardupilot_options(parser, speed_default="max")
     parser.add_argument(
         "--sim-speed",
         default="1",
@@ -123,7 +126,7 @@ def main(argv: list[str]) -> int:
         help="fraction of missions whose instruction names a target not in the scene "
         "(they must end target_not_found)",
     )
-    faults = parser.add_argument_group("injected faults (sim-mavlink and px4-sitl; gusts also sim)")
+    faults = parser.add_argument_group("injected faults (sim-mavlink and the SITL vehicles; gusts also sim)")
     faults.add_argument(
         "--link-loss", type=float, default=0.0, help="fraction of MAVLink datagrams lost, each way"
     )
@@ -176,13 +179,17 @@ def main(argv: list[str]) -> int:
             checkpoint=args.checkpoint, detector=args.detector, parallel=args.parallel,
             detector_checkpoint=args.detector_checkpoint, scale_moves=not args.fixed_moves,
             px4_dir=args.px4, px4_speed=_speed("--px4-speed", args.px4_speed), faults=faults_from_args(args),
+            ardupilot_dir=None if args.ardupilot is None else str(args.ardupilot),
+            ardupilot_speed=_speed("--ardupilot-speed", args.ardupilot_speed),
             sim_speed=_speed("--sim-speed", args.sim_speed),
             rerun=args.rerun, ray=args.ray, targets=args.targets, twins=args.twins,
             instructions=args.instructions, absent=args.absent, second_choices=args.second_choices,
         )  # fmt: skip
         if config.vehicle == "px4-sitl":  # a missing PX4 folder is named before anything flies
             config = replace(config, px4_dir=str(find_px4_dir(config.px4_dir)))
-    except Px4FolderError as exc:
+        if config.vehicle == "ardupilot-sitl":  # so is a missing ArduPilot folder
+            config = replace(config, ardupilot_dir=resolve_ardupilot_dir(config.ardupilot_dir))
+    except (Px4FolderError, ArduPilotFolderError) as exc:
         print(f"dronectl benchmark-missions: {exc}", file=sys.stderr)
         return 2
     except ValueError as exc:

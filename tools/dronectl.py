@@ -21,6 +21,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("tools.bench_cmd", "benchmarks: `bench sim|perception|flight`"),
     "sim-vehicle": ("tools.sim_vehicle_cmd", "serve the simulated drone as a PX4-flavoured MAVLink vehicle"),
     "px4-sim": ("tools.px4_sim_cmd", "real PX4 SITL flying the simulated drone (lockstep), camera as MJPEG"),
+    "ardupilot-sim": ("tools.ardupilot_sim_cmd", "real ArduCopter SITL flying the simulated drone, lockstep"),
     "move": ("tools.move_cmd", "connect to a vehicle, take off, fly one discrete move, land"),
     "train-detector": ("tools.train_detector_cmd", "train the image-based target detector"),
     "train": ("tools.train_cmd", "train the latent dynamics planner"),

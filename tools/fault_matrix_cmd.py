@@ -17,12 +17,16 @@ from pathlib import Path
 
 from controller.missions.benchmark import BenchmarkConfig
 from controller.missions.fault_matrix import format_markdown, run_fault_matrix
+from tools.ardupilot_options import FOLDER_HELP
 
 
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="dronectl fault-matrix", description=__doc__.splitlines()[0])
-    parser.add_argument("--vehicle", default="sim-mavlink", choices=("sim-mavlink", "px4-sitl"))
+    parser.add_argument(
+        "--vehicle", default="sim-mavlink", choices=("sim-mavlink", "px4-sitl", "ardupilot-sitl")
+    )
     parser.add_argument("--px4", help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
+    parser.add_argument("--ardupilot", help=FOLDER_HELP)
     parser.add_argument("--n", type=int, default=20, help="missions per fault (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=1, help="benchmark seed (default: %(default)s)")
     parser.add_argument("--planner", default="latent", help="one planner (default: %(default)s)")
@@ -34,7 +38,7 @@ def main(argv: list[str]) -> int:
     try:
         base = BenchmarkConfig(
             n=args.n, seed=args.seed, planners=(args.planner,), vehicle=args.vehicle, parallel=args.parallel,
-            px4_dir=args.px4,
+            px4_dir=args.px4, ardupilot_dir=args.ardupilot,
         )  # fmt: skip
     except ValueError as exc:
         parser.error(str(exc))

@@ -23,7 +23,15 @@ from typing import Any
 
 import numpy as np
 
-from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission, PortSpec, parse_mission
+from controller.missions.schema import (
+    ARDUPILOT_SITL,
+    PX4_SITL,
+    SIM,
+    SIM_MAVLINK,
+    Mission,
+    PortSpec,
+    parse_mission,
+)
 from controller.missions.suite import UDP_PORTS_PER_MISSION
 from controller.planning.latent.instructions import builtin_templates
 from controller.planning.latent.phrasing import TargetName, describe
@@ -36,8 +44,9 @@ CORPORA = ("train", "heldout")
 
 @dataclass(frozen=True)
 class BenchmarkConfig:
-    """What to fly. `vehicle`: `sim` (in-process), `sim-mavlink` (sim-vehicle + MAVSDK + MJPEG) or
-    `px4-sitl` (real PX4 SITL flying the world, lockstep, `px4_speed` "max" by default)."""
+    """What to fly. `vehicle`: `sim` (in-process), `sim-mavlink` (sim-vehicle + MAVSDK + MJPEG),
+    `px4-sitl` (real PX4 SITL flying the world, lockstep, `px4_speed` "max" by default) or
+    `ardupilot-sitl` (real ArduCopter SITL, likewise, `ardupilot_speed`)."""
 
     n: int = 200
     seed: int = 0
@@ -72,6 +81,9 @@ class BenchmarkConfig:
     px4_dir: str | None = None
     """PX4 SITL build folder for `px4-sitl` (None: $PX4_SITL_DIR)."""
     px4_speed: float | str = "max"
+    ardupilot_dir: str | None = None
+    """ArduCopter SITL folder for `ardupilot-sitl` (None: $ARDUPILOT_SITL_DIR, ../shared/ardupilot-sitl)."""
+    ardupilot_speed: float | str = "max"
     sim_speed: float | str = 1.0
     """sim-mavlink: the sim-vehicle's speed, a factor or "max" (the missions' `sim_speed`)."""
     faults: dict[str, Any] | None = None
@@ -84,9 +96,10 @@ class BenchmarkConfig:
     def __post_init__(self) -> None:
         if self.n < 1 or self.parallel < 1:
             raise ValueError("n and parallel must be >= 1")
-        if self.vehicle not in (SIM, SIM_MAVLINK, PX4_SITL):
+        if self.vehicle not in (SIM, SIM_MAVLINK, PX4_SITL, ARDUPILOT_SITL):
             raise ValueError(
-                f"vehicle must be {SIM!r}, {SIM_MAVLINK!r} or {PX4_SITL!r}, got {self.vehicle!r}"
+                f"vehicle must be {SIM!r}, {SIM_MAVLINK!r}, {PX4_SITL!r} or {ARDUPILOT_SITL!r}, "
+                f"got {self.vehicle!r}"
             )
         unknown = set(self.planners) - {"latent", "classic", "random", "oracle"}
         if unknown or not self.planners:
@@ -161,6 +174,8 @@ def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozen
             **({"sim_speed": config.sim_speed} if config.vehicle == SIM_MAVLINK else {}),
             **({"px4": {"dir": config.px4_dir, "speed": config.px4_speed, "keep_ulog": False}}
                if config.vehicle == PX4_SITL else {}),
+            **({"ardupilot": {"dir": config.ardupilot_dir, "speed": config.ardupilot_speed,
+                              "keep_logs": False}} if config.vehicle == ARDUPILOT_SITL else {}),
             **({"faults": {**config.faults, "seed": seed}} if config.faults else {}),
         }  # fmt: skip
         mission = parse_mission(data)

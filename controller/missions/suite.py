@@ -22,6 +22,7 @@ from typing import Any
 from controller.missions.report import claim_report_dir
 from controller.missions.results import MissionResult
 from controller.missions.schema import (
+    ARDUPILOT_SITL,
     PX4_SITL,
     SIM_MAVLINK,
     Mission,
@@ -50,6 +51,8 @@ class SuiteOptions:
     max_slots: int = 25
     px4_dir: str | None = None
     """The PX4 SITL folder for `px4-sitl` missions that name none (None: $PX4_SITL_DIR)."""
+    ardupilot_dir: str | None = None
+    """The ArduPilot SITL folder for `ardupilot-sitl` missions that name none (None: their default)."""
 
     def __post_init__(self) -> None:
         if self.parallel < 1:
@@ -147,6 +150,9 @@ def assign_ports(missions: list[Mission], options: SuiteOptions) -> list[Mission
             mission = mission.model_copy(
                 update={"px4": mission.px4.model_copy(update={"dir": options.px4_dir})}
             )
+        if mission.vehicle == ARDUPILOT_SITL and mission.ardupilot.dir is None and options.ardupilot_dir:
+            spec = mission.ardupilot.model_copy(update={"dir": options.ardupilot_dir})
+            mission = mission.model_copy(update={"ardupilot": spec})
         out.append(mission)
     return out
 

@@ -39,6 +39,8 @@ ARDUPILOT_DIR_ENV = "ARDUPILOT_SITL_DIR"
 MAX_INSTANCE = 9
 MAVLINK_BASE_PORT = 5760  # ArduPilot's SERIAL0 port number; here the UDP port it sends its MAVLink to
 AIRFRAME_PARAMS = Path(__file__).with_name("pybullet_quadx.parm")
+SHARED_ARDUPILOT_DIR = Path(__file__).resolve().parents[3] / "shared" / "ardupilot-sitl"
+"""`../shared/ardupilot-sitl` beside the checkout: where an ArduPilot folder is looked for last."""
 SPEEDUP_NO_LIMIT = 100.0
 """ArduPilot's --speedup: the bridge paces the simulation itself, so ArduPilot's own pacing never binds."""
 
@@ -78,8 +80,11 @@ def check_ardupilot_dir(path: Path) -> Path:
     return path.resolve()
 
 
-def find_ardupilot_dir(explicit: str | Path | None, fallbacks: tuple[Path, ...] = ()) -> Path:
-    """The ArduPilot SITL folder: `explicit`, else $ARDUPILOT_SITL_DIR, else the first fallback with one."""
+def find_ardupilot_dir(
+    explicit: str | Path | None, fallbacks: tuple[Path, ...] = (SHARED_ARDUPILOT_DIR,)
+) -> Path:
+    """The ArduPilot SITL folder: `explicit` (`--ardupilot`), else $ARDUPILOT_SITL_DIR, else the first
+    fallback (`../shared/ardupilot-sitl` beside the checkout) that holds one."""
     return find_sitl_dir(
         explicit, ARDUPILOT_DIR_ENV, fallbacks, check_ardupilot_dir, "--ardupilot", ArduPilotFolderError,
         "a folder with bin/arducopter, or an ArduPilot checkout built with `./waf copter`",

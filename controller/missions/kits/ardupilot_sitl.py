@@ -50,13 +50,6 @@ log = logging.getLogger(__name__)
 CLIENT_PORT_BASE = 15160  # the GUIDED backend listens behind the relay on 15160+N
 VIDEO_PORT_BASE = 18920  # the bridge's MJPEG stream on 18920+N
 ARDUPILOT_START_TIMEOUT_S = 90.0
-SHARED_ARDUPILOT = Path(__file__).resolve().parents[4] / "shared" / "ardupilot-sitl"
-"""`../shared/ardupilot-sitl` beside the checkout: the last place an ArduPilot folder is looked for."""
-
-
-def ardupilot_dir_for(spec_dir: str | None) -> Path:
-    """The mission's ArduPilot folder: its own, else $ARDUPILOT_SITL_DIR, else ../shared/ardupilot-sitl."""
-    return find_ardupilot_dir(spec_dir, (SHARED_ARDUPILOT,))
 
 
 def ardupilot_sim_config(
@@ -66,7 +59,7 @@ def ardupilot_sim_config(
     spec = mission.ardupilot
     start = start_offset_for(mission, SIM_HFOV_DEG, SIM_HFOV_DEG)
     return ArduPilotSimConfig(
-        ardupilot_dir=ardupilot_dir_for(spec.dir),
+        ardupilot_dir=find_ardupilot_dir(spec.dir),
         instance=instance,
         **simulated_world_fields(mission, start),
         video_port=VIDEO_PORT_BASE + instance,
