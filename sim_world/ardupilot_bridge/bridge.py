@@ -185,7 +185,6 @@ class ArduPilotBridge:
             quaternion_wxyz(truth.rotation_ned_frd),
             (self._range_m,),
         )
-        self.server.reply(reply)
         self._last_reply, self._last_frame = reply, packet.frame_count
         if self.camera is not None:
             self.camera.tick(world.time_s)
@@ -199,6 +198,7 @@ class ArduPilotBridge:
             st.ardupilot_rate_hz = packet.frame_rate_hz
             st.motors_spinning = self.mapping.spinning(packet.pwm_us)
             st.camera_frames = self.camera.frames if self.camera else 0
+        self.server.reply(reply)  # last: whoever reads the reply finds the frame counted
 
     def _forward_range_m(self, rotation_ned_frd: np.ndarray) -> float:
         """Distance along the body's forward axis to the first surface (the drone's own body excluded);
