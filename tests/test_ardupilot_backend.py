@@ -15,6 +15,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from flight.ardupilot_backend import ArduPilotConfig, ArduPilotVehicle
 from flight.ardupilot_state import COPTER_MODES, ArduPilotState, flight_mode_of
+from flight.autopilots import MavlinkVehicle, detect_autopilot
 from flight.errors import CommandDeniedError, ModeChangeError, VehicleConnectionError
 from flight.pymavlink_link import MavlinkLink
 from flight.safety import FlightTimeouts
@@ -217,3 +218,25 @@ def test_with_a_signing_key_every_frame_is_signed_and_unsigned_ones_are_dropped(
     finally:
         link.close()
         unsigned_copter.close()
+
+
+def test_a_url_is_flown_by_the_backend_its_heartbeat_asks_for() -> None:
+    port = _free_udp_port()
+    copter = FakeCopter(port)
+    try:
+        assert detect_autopilot(f"udpin://127.0.0.1:{port}", 2.0) == "ardupilot"
+        vehicle = MavlinkVehicle(f"udpin://127.0.0.1:{port}")
+        with vehicle:
+            vehicle.connect(3.0)
+            assert isinstance(vehicle.inner, ArduPilotVehicle)
+            assert vehicle.telemetry().flight_mode == FlightMode.MANUAL  # STABILIZE, through the backend
+    finally:
+        copter.close()
+    px4 = FakeCopter(port, autopilot=M.MAV_AUTOPILOT_PX4)
+    try:
+        assert detect_autopilot(f"udpin://127.0.0.1:{port}", 2.0) == "px4"
+    finally:
+        px4.close()
+    silent = MavlinkVehicle(f"udpin://127.0.0.1:{port}", shown_url="udpin://10.0.0.9:14550")
+    with pytest.raises(VehicleConnectionError, match=r"heartbeat on udpin://10.0.0.9:14550 \(relayed to"):
+        silent.connect(0.3)
