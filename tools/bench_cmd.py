@@ -1,7 +1,7 @@
-"""`dronectl bench sim|perception|inference|flight|px4 [options]`: the speed benchmarks.
+"""`dronectl bench sim|perception|inference|flight|px4|ardupilot [options]`: the speed benchmarks.
 
 Each benchmark's measuring code lives with the code it measures (`sim_world.bench`,
-`flight.bench`, `flight.bench_px4`, `perception.bench`); its command line is a
+`flight.bench`, `flight.bench_px4`, `flight.bench_ardupilot`, `perception.bench`); its command line is a
 `tools/bench_<name>.py` with `main(argv) -> int`. This command only picks the module
 (imported lazily, so one benchmark never pays for another's imports) and hands it the
 rest of the command line. `dronectl bench <name> --help` shows a benchmark's options.
@@ -18,6 +18,7 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "inference": ("tools.bench_inference", "planner and detector on torch and on ONNX Runtime, side by side"),
     "flight": ("tools.bench_flight", "vehicle command and telemetry latency"),
     "px4": ("tools.bench_px4", "real PX4 SITL in lockstep: readiness, hover drift, lockstep speed"),
+    "ardupilot": ("tools.bench_ardupilot", "real ArduCopter SITL in lockstep: readiness, hover drift, speed"),
 }
 
 
