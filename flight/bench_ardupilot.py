@@ -58,7 +58,7 @@ def hover_run(
         instance=instance,
         camera=True,  # the truth endpoint lives in the render process: a 32 px camera stands in "without"
         image_size_px=224 if camera else 32,
-        timing=JsonTiming(speed=speed, camera_fps=30.0 if camera else 1.0),
+        timing=JsonTiming(speed=speed, camera_fps=30.0 if camera else 1.0, idle_camera_fps=None),
         video_port=18960 + instance,
         system_id=SYSTEM_ID,
     )

@@ -29,7 +29,7 @@ from sim_world.ardupilot_bridge.protocol import ServoPacket
 from sim_world.physics.wind import WindConfig
 from sim_world.scene.config import DEFAULT_SCENE
 from sim_world.sitl.imu import ImuModel, SensorNoise
-from sim_world.sitl.rig import build_sitl_world
+from sim_world.sitl.rig import CameraClock, build_sitl_world
 
 
 class FakeArduPilot:
@@ -173,3 +173,25 @@ def test_ardupilot_sends_its_mavlink_to_loopback_only_with_the_runs_system_id(tm
     finally:
         process.close()
     assert not process.workdir.exists()  # the private working folder goes with the run
+
+
+def test_the_camera_renders_at_its_rate_once_the_motors_spin_and_slowly_before(rig) -> None:
+    world, bridge, fake, _thread, _ = rig
+    captured: list[float] = []
+    timing = JsonTiming(speed=None, camera_fps=30.0, idle_camera_fps=2.0)
+    camera = CameraClock(lambda: captured.append(world.time_s), timing.camera_fps)
+    filmed = ArduPilotBridge(world, bridge.server, bridge.imu, timing, camera)
+    stop = threading.Event()
+    thread = threading.Thread(target=filmed.run, args=(stop,), daemon=True)
+    thread.start()
+    try:
+        for n in range(400):  # 1 s disarmed on the ground (ArduPilot booting): 2 frames
+            fake.frame(n, pwm=1000)
+        booting = len(captured)
+        for n in range(400, 800):  # 1 s with the motors at ArduPilot's arming spin: 30 frames
+            fake.frame(n, pwm=1100)
+    finally:
+        stop.set()
+        thread.join(2.0)
+    assert booting == 2
+    assert len(captured) - booting == pytest.approx(30, abs=1)

@@ -59,6 +59,10 @@ def _parser() -> argparse.ArgumentParser:
     cam.add_argument("--size", type=int, default=224, help="camera image size in pixels (default 224)")
     cam.add_argument("--video-port", type=int, help="MJPEG HTTP port (default 8090+N)")
     cam.add_argument("--fps", type=float, default=30.0, help="frames per simulated second (default 30)")
+    cam.add_argument(
+        "--idle-fps", type=float, default=2.0,
+        help="frames per simulated second while no motor spins (ArduPilot booting or disarmed; default 2)",
+    )  # fmt: skip
     return ap
 
 
@@ -75,7 +79,9 @@ def main(argv: list[str]) -> int:
             camera=not args.no_camera,
             video_port=args.video_port,
             mavlink_port=args.mavlink_port,
-            timing=JsonTiming(speed=args.speed, camera_fps=args.fps),
+            timing=JsonTiming(
+                speed=args.speed, camera_fps=args.fps, idle_camera_fps=min(args.idle_fps, args.fps)
+            ),
             noise=SensorNoise().scaled(args.noise),
             system_id=args.sysid,
             params=parse_param_overrides(args.param),

@@ -111,7 +111,7 @@ class BenchmarkConfig:
         if self.instructions is not None and self.instructions not in CORPORA:
             raise ValueError(f"instructions must be one of {CORPORA}, got {self.instructions!r}")
         if self.sim_speed != 1.0 and self.vehicle != SIM_MAVLINK:
-            raise ValueError(f"sim_speed goes with vehicle {SIM_MAVLINK!r} (px4-sitl: px4_speed)")
+            raise ValueError(f"sim_speed goes with vehicle {SIM_MAVLINK!r} (SITL: px4/ardupilot_speed)")
         if not 0.0 <= self.absent <= 1.0:
             raise ValueError(f"absent must be a fraction in [0, 1], got {self.absent:g}")
 

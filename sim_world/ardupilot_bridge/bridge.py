@@ -8,7 +8,9 @@ Each servo packet ArduPilot sends is one physics frame:
 3. the reply carries the new state: simulated time, gyro and specific force with IMU noise
    (`sim_world.sitl.imu`), NED position and velocity, the attitude quaternion, and the forward
    rangefinder (a ray along the body's forward axis to the first surface, at `rangefinder_every`);
-4. the camera takes a pose every 1/fps of simulated time;
+4. the camera takes a pose every 1/fps of simulated time (1/`idle_camera_fps` while no motor spins:
+   ArduPilot boots for ~41 s of simulated time, disarmed on the ground, and nothing reads the camera
+   before a takeoff; at 30 Hz the 224 px rendering held that boot to ~2× real time);
 5. with a finite `speed`, the loop sleeps until the wall clock catches up (× speed).
 
 A packet with the frame number already answered is ArduPilot re-sending (our answer was lost or
@@ -49,6 +51,7 @@ class JsonTiming:
 
     frame_period_s: float = 0.0025  # 400 Hz: ArduPilot's SIM_RATE_HZ, which the params file sets to match
     camera_fps: float = 30.0
+    idle_camera_fps: float | None = 2.0  # while no motor spins (booting, disarmed); None: camera_fps always
     speed: float | None = 1.0  # simulated s per wall s; None: as fast as ArduPilot and the physics go
     rangefinder_every: int = 8  # frames between rangefinder rays (50 Hz at 400 Hz)
     rangefinder_max_m: float = 12.0
@@ -61,6 +64,8 @@ class JsonTiming:
             raise ValueError(f"speed must be in [0.05, 100] or None (as fast as possible), got {self.speed}")
         if not 1.0 <= self.camera_fps <= 120.0:
             raise ValueError(f"camera_fps must be in [1, 120], got {self.camera_fps}")
+        if self.idle_camera_fps is not None and not 0.1 <= self.idle_camera_fps <= self.camera_fps:
+            raise ValueError(f"idle_camera_fps must be in [0.1, camera_fps] or None: {self.idle_camera_fps}")
         if self.rangefinder_every < 1 or not self.rangefinder_max_m > 0.5:
             raise ValueError("rangefinder_every must be >= 1 and rangefinder_max_m > 0.5")
 
@@ -115,6 +120,7 @@ class ArduPilotBridge:
         self._last_frame: int | None = None
         self._last_reply = b""
         self._range_m = math.inf
+        self._next_idle_frame_s = 0.0
         self._last_heard = time.monotonic()
         self._stats = JsonBridgeStats()
         self._stats_lock = threading.Lock()
@@ -186,8 +192,9 @@ class ArduPilotBridge:
             (self._range_m,),
         )
         self._last_reply, self._last_frame = reply, packet.frame_count
+        spinning = self.mapping.spinning(packet.pwm_us)
         if self.camera is not None:
-            self.camera.tick(world.time_s)
+            self._camera_tick(world.time_s, spinning)
         with self._stats_lock:
             st = self._stats
             if last is not None:
@@ -196,9 +203,19 @@ class ArduPilotBridge:
             st.sim_s = world.time_s
             st.lockstep = True
             st.ardupilot_rate_hz = packet.frame_rate_hz
-            st.motors_spinning = self.mapping.spinning(packet.pwm_us)
+            st.motors_spinning = spinning
             st.camera_frames = self.camera.frames if self.camera else 0
         self.server.reply(reply)  # last: whoever reads the reply finds the frame counted
+
+    def _camera_tick(self, sim_s: float, spinning: bool) -> None:
+        """A camera pose at `camera_fps`, or at `idle_camera_fps` while no motor spins."""
+        assert self.camera is not None
+        idle_fps = self.timing.idle_camera_fps
+        if spinning or idle_fps is None:
+            self.camera.tick(sim_s)
+        elif sim_s + 1e-9 >= self._next_idle_frame_s:
+            self.camera.tick(sim_s)
+            self._next_idle_frame_s = sim_s + 1.0 / idle_fps
 
     def _forward_range_m(self, rotation_ned_frd: np.ndarray) -> float:
         """Distance along the body's forward axis to the first surface (the drone's own body excluded);
