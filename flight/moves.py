@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from core.frames import world_ned_to_heading
+from drone_inspect_core.frames import world_ned_to_heading
 from flight.types import Displacement, PositionNed, VelocityBody
 from flight.vehicle import Vehicle, wait_for
 

@@ -5,7 +5,7 @@ advances the physics itself, only inside `sleep()` and the blocking calls, so a
 flight runs as fast as the CPU allows and is deterministic for a given world
 seed. It keeps PX4's client-visible rules (a setpoint before offboard, offboard
 only when armed, refusals as typed errors) so that code tested here flies the
-MAVSDK backend unchanged. Frames are converted only through `core.frames`.
+MAVSDK backend unchanged. Frames are converted only through `drone_inspect_core.frames`.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from core.frames import enu_to_ned, yaw_enu_to_ned_rad
+from drone_inspect_core.frames import enu_to_ned, yaw_enu_to_ned_rad
 from flight.errors import CommandDeniedError, FlightTimeoutError
 from flight.safety import FlightTimeouts
 from flight.types import Attitude, FlightMode, PositionNed, Telemetry, VelocityBody, VelocityNed

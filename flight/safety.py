@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
-from core.frames import heading_to_world_ned, world_ned_to_heading
+from drone_inspect_core.frames import heading_to_world_ned, world_ned_to_heading
 from flight.errors import FlightError, LinkLostError
 from flight.types import PositionNed, Telemetry, VelocityBody
 from flight.vehicle import Vehicle

@@ -15,7 +15,7 @@ from typing import Protocol
 import cv2
 import numpy as np
 
-from core.centring import is_centred
+from drone_inspect_core.centring import is_centred
 from perception.types import Detection
 
 EPSILON_BOX_RGB = (255, 255, 0)

@@ -38,7 +38,7 @@ import torch
 import torch.nn.functional as F
 from safetensors.torch import load_file, save_file
 
-from core.onnx_runtime import OnnxModule, onnx_for
+from drone_inspect_core.onnx_runtime import OnnxModule, onnx_for
 from perception.attributes import read_attribute
 from perception.detector_model import EDGE_SCALE_PX, STRIDE, CentreNet, DetectorConfig, fuse_for_inference
 from perception.errors import DetectorCheckpointError

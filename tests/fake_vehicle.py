@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 
-from core.frames import heading_to_world_ned
+from drone_inspect_core.frames import heading_to_world_ned
 from flight.errors import CommandDeniedError
 from flight.types import Attitude, FlightMode, PositionNed, Telemetry, VelocityBody, VelocityNed
 from flight.vehicle import Vehicle

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from core.frames import heading_to_world_ned
+from drone_inspect_core.frames import heading_to_world_ned
 from sim_world.vehicle.model import AutopilotStatus, Kinematics, ModelRefused
 
 

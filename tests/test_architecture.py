@@ -84,7 +84,7 @@ def test_only_the_simulator_imports_pybullet_and_only_the_mavsdk_backend_imports
 
 def test_only_core_onnx_runtime_imports_onnxruntime() -> None:
     users = [m for m, p in MODULES.items() if any(i.split(".")[0] == "onnxruntime" for i in _imports(p, m))]
-    assert users == ["core.onnx_runtime"], users
+    assert users == ["drone_inspect_core.onnx_runtime"], users
 
 
 def test_no_import_cycles() -> None:

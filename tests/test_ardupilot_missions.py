@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from controller.missions.benchmark_plan import BenchmarkConfig, benchmark_missions
+from controller.benchmarks.mission_plan import BenchmarkConfig, benchmark_missions
 from controller.missions.schema import MissionFileError, load_mission, parse_mission
-from tools.fly_cmd import main as fly_main
+from dronectl.fly_cmd import main as fly_main
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -127,7 +127,7 @@ def test_an_ardupilot_sitl_mission_is_centred_and_leaves_nothing_behind(tmp_path
 def _fly_until_airborne(out: Path) -> tuple[subprocess.Popen[str], dict]:
     """`dronectl fly` on the ArduPilot mission in a subprocess, returned once the loop has taken a step."""
     command = [
-        sys.executable, "-m", "tools.dronectl", "fly", "--mission", str(MISSION),
+        sys.executable, "-m", "dronectl", "fly", "--mission", str(MISSION),
         "--ardupilot", str(ARDUPILOT_DIR), "--ardupilot-speed", "max", "--out", str(out),
     ]  # fmt: skip
     process = subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

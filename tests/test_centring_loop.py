@@ -16,7 +16,7 @@ from controller.planning.loop import (
     Outcome,
 )
 from controller.planning.planners import ClassicPlanner, Observation, Plan
-from core.centring import default_stop_margin_px
+from drone_inspect_core.centring import default_stop_margin_px
 from flight.types import VelocityBody
 from perception.types import Frame
 

@@ -12,8 +12,8 @@ import pytest
 
 import sim_world.collection.collect as collect_module
 from controller.planning.actions import Action, XMove, ZMove, label_from_offset
-from core.dataset import DatasetError
-from core.frames import ned_to_enu
+from drone_inspect_core.dataset import DatasetError
+from drone_inspect_core.frames import ned_to_enu
 from sim_world.collection.collect import CollectConfig, collect, load_manifest
 from sim_world.collection.plan import SECTOR_DIRECTIONS, plan_collection
 from sim_world.world import World, WorldConfig

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from core.dataset import DatasetError, load_manifest, row_targets
-from tools.collect_cmd import main as collect_main
-from tools.collect_cmd import target_count
+from drone_inspect_core.dataset import DatasetError, load_manifest, row_targets
+from dronectl.collect_cmd import main as collect_main
+from dronectl.collect_cmd import target_count
 
 TRUTH = ("centre_px", "offset_px", "bbox_px", "in_view", "fully_in_view", "visible_fraction", "depth_m")
 SMALL = ["--n-goal", "2", "--n-per-sector", "1", "--n-test", "3", "--n-empty", "4", "--size", "80"]

@@ -69,7 +69,7 @@ def test_one_move_flight_is_deterministic_and_ends_landed() -> None:
 
 
 def test_move_command_flies_the_in_process_backend(capsys: pytest.CaptureFixture[str]) -> None:
-    from tools.move_cmd import main
+    from dronectl.move_cmd import main
 
     assert main(["--vehicle", "sim", "--right-m", "0.3", "--takeoff-alt", "1.5"]) == 0
     out = capsys.readouterr().out
@@ -78,7 +78,7 @@ def test_move_command_flies_the_in_process_backend(capsys: pytest.CaptureFixture
 
 
 def test_move_command_explains_a_bad_url(capsys: pytest.CaptureFixture[str]) -> None:
-    from tools.move_cmd import main
+    from dronectl.move_cmd import main
 
     assert main(["--vehicle", "udpin://localhost:14540", "--right-m", "0.5"]) == 1
     assert "udpin://127.0.0.1:14540" in capsys.readouterr().err
@@ -86,7 +86,7 @@ def test_move_command_explains_a_bad_url(capsys: pytest.CaptureFixture[str]) -> 
 
 def test_move_command_flies_only_the_axes_given(monkeypatch: pytest.MonkeyPatch) -> None:
     """`--forward-m 0.5` is a forward move only (it used to add the default 0.5 m right)."""
-    import tools.move_cmd as move_cmd
+    import dronectl.move_cmd as move_cmd
 
     flown = []
     monkeypatch.setattr(move_cmd, "fly_move", lambda vehicle, flight, limits: flown.append(flight) or 1 / 0)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from _quad_rig import QuadRig
 
-from core.frames import (
+from drone_inspect_core.frames import (
     enu_to_ned,
     flu_to_frd,
     frd_to_flu,

@@ -10,8 +10,8 @@ from controller.planning.grounding import (
     parse_instruction,
     select_target,
 )
-from controller.planning.latent.instructions import CORPORA, builtin_templates, fill
-from core.targets import TARGET_KINDS
+from controller.training.instructions import CORPORA, builtin_templates, fill
+from drone_inspect_core.targets import TARGET_KINDS
 from perception.types import Detection
 
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import controller.gym_env as gym_env
-from controller.gym_policies import evaluate, wilson_interval
+import controller.evaluation.gym_env as gym_env
+from controller.evaluation.gym_policies import evaluate, wilson_interval
 from controller.planning.actions import Action, XMove, ZMove, label_from_offset
 
 LEFT = Action(XMove.LEFT, ZMove.NONE).index

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from controller.planning.actions import label_from_offset
-from controller.planning.latent.augment import (
+from controller.training.augment import (
     augment,
     colour_jitter,
     geometric,

@@ -11,7 +11,7 @@ from safetensors.torch import load_file, save_file
 from controller.planning.latent.checkpoint import CONFIG_FILE, WEIGHTS_FILE, load_checkpoint, save_checkpoint
 from controller.planning.latent.config import ModelConfig
 from controller.planning.latent.errors import PlannerCheckpointError
-from controller.planning.latent.instructions import tokenizer_corpus
+from controller.training.instructions import tokenizer_corpus
 from controller.planning.latent.model import LatentDynamicsModel
 from controller.planning.latent.tokenizer import VOCAB_FILE, InstructionTokenizer
 

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from controller.planning.latent.config import LossWeights
-from controller.planning.latent.losses import (
+from controller.training.losses import (
     consistency_loss,
     directional_loss,
     distance,

@@ -5,10 +5,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controller.planning.latent.data import TargetRef
+from controller.training.data import TargetRef
 from controller.planning.latent.errors import InstructionError
-from controller.planning.latent.pairs import absent_names, target_name_for
-from controller.planning.latent.phrasing import (
+from controller.training.pairs import absent_names, target_name_for
+from controller.training.phrasing import (
     SYNONYMS,
     TargetName,
     all_phrasings,
@@ -16,8 +16,8 @@ from controller.planning.latent.phrasing import (
     is_kind_phrase_file,
     read_kind_phrases,
 )
-from controller.planning.latent.presence_eval import auroc, judge_presence
-from core.targets import TARGET_KINDS
+from controller.evaluation.presence import auroc, judge_presence
+from drone_inspect_core.targets import TARGET_KINDS
 
 
 def test_held_out_synonyms_never_reach_the_training_text() -> None:

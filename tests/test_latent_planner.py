@@ -8,7 +8,7 @@ from controller.planning.actions import Action
 from controller.planning.latent.checkpoint import load_checkpoint, save_checkpoint
 from controller.planning.latent.config import ModelConfig
 from controller.planning.latent.errors import ImageInputError, InstructionError
-from controller.planning.latent.instructions import tokenizer_corpus
+from controller.training.instructions import tokenizer_corpus
 from controller.planning.latent.model import LatentDynamicsModel
 from controller.planning.latent.planner import LatentPlanner
 from controller.planning.latent.tokenizer import InstructionTokenizer

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from controller.planning.latent.checkpoint import load_checkpoint
-from controller.planning.latent.evaluate import evaluate_checkpoint
+from controller.evaluation.evaluate import evaluate_checkpoint
 from controller.planning.planners import DEFAULT_CHECKPOINT
 
 FRESH_SEED = 7_777

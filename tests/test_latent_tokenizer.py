@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from controller.planning.latent.errors import InstructionError
-from controller.planning.latent.instructions import builtin_templates, fill, tokenizer_corpus
+from controller.training.instructions import builtin_templates, fill, tokenizer_corpus
 from controller.planning.latent.tokenizer import InstructionTokenizer
 
 
@@ -40,7 +40,7 @@ def test_vocabulary_is_the_same_in_every_process_and_for_any_corpus_order(
     tokenizer.save(tmp_path)
     code = (
         "import sys; from pathlib import Path;"
-        "from controller.planning.latent.instructions import tokenizer_corpus;"
+        "from controller.training.instructions import tokenizer_corpus;"
         "from controller.planning.latent.tokenizer import InstructionTokenizer;"
         "InstructionTokenizer.train(tokenizer_corpus()).save(Path(sys.argv[1]))"
     )

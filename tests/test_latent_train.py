@@ -7,9 +7,9 @@ import torch
 from latent_synthetic import write_synthetic_dataset
 
 from controller.planning.latent.config import AugmentConfig, LossWeights, ModelConfig, TrainConfig
-from controller.planning.latent.data import load_images, load_index
-from controller.planning.latent.evaluate import evaluate_checkpoint
-from controller.planning.latent.train import CURVES_FILE, METRICS_FILE, train
+from controller.training.data import load_images, load_index
+from controller.evaluation.evaluate import evaluate_checkpoint
+from controller.training.train import CURVES_FILE, METRICS_FILE, train
 
 
 @pytest.fixture(scope="module")
@@ -57,7 +57,7 @@ def test_training_beats_chance_on_held_out_images(synthetic: Path, tmp_path: Pat
 
 
 def test_train_command_help_renders_and_cpu_is_the_default_preset() -> None:
-    from tools.train_cmd import build_parser
+    from dronectl.train_cmd import build_parser
 
     parser = build_parser()
     assert "label-exact" in parser.format_help()  # the preset notes hold '%', argparse must not choke
@@ -72,7 +72,7 @@ def test_grounded_training_plans_toward_the_target_the_words_name(tmp_path: Path
 
     from controller.planning.latent.checkpoint import load_checkpoint
     from controller.planning.latent.config import PRESETS
-    from controller.planning.latent.evaluate import evaluate_loaded
+    from controller.evaluation.evaluate import evaluate_loaded
 
     one = write_synthetic_dataset(tmp_path / "one", n_goal=40, n_train=400, n_test=40, size=64, seed=1)
     data = write_synthetic_dataset(tmp_path / "two", n_goal=40, n_train=400, n_test=120, size=64, targets=2)
@@ -145,7 +145,7 @@ def test_channels_last_is_the_same_model_in_another_memory_order(synthetic: Path
 
     from controller.planning.latent.checkpoint import load_checkpoint
     from controller.planning.latent.model import LatentDynamicsModel
-    from controller.planning.latent.train_described import model_input
+    from controller.training.train_described import model_input
 
     torch.manual_seed(0)
     cfg = ModelConfig(
@@ -191,7 +191,7 @@ def test_ema_saves_the_moving_average_of_the_weights(synthetic: Path, tmp_path: 
 
 
 def test_an_unknown_or_missing_training_device_is_a_clear_error(synthetic: Path, tmp_path: Path) -> None:
-    from controller.planning.latent.train import resolve_device
+    from controller.training.train import resolve_device
 
     assert resolve_device("cpu").type == "cpu"
     assert resolve_device("auto").type == ("cuda" if torch.cuda.is_available() else "cpu")
@@ -217,7 +217,7 @@ def test_mirror_tta_swaps_left_and_right_and_treats_an_image_and_its_mirror_alik
 
     from controller.planning.actions import ALL_ACTIONS
     from controller.planning.latent.checkpoint import load_checkpoint
-    from controller.planning.latent.evaluate import MIRRORED_ACTION, evaluate_loaded
+    from controller.evaluation.evaluate import MIRRORED_ACTION, evaluate_loaded
     from controller.planning.planners import DEFAULT_CHECKPOINT
 
     for action in ALL_ACTIONS:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from controller.missions.benchmark import BenchmarkConfig, benchmark_missions, format_summary, summarise
+from controller.benchmarks.missions import BenchmarkConfig, benchmark_missions, format_summary, summarise
 from controller.missions.results import MissionResult
 
 

@@ -22,7 +22,7 @@ def test_fly_refuses_an_out_folder_that_holds_an_earlier_flight(tmp_path: Path) 
     earlier.mkdir()
     (earlier / "flight.tlog").write_bytes(b"t" * 1000)
     done = subprocess.run(
-        [sys.executable, "-m", "tools.dronectl", "fly", "--out", str(earlier)],
+        [sys.executable, "-m", "dronectl", "fly", "--out", str(earlier)],
         cwd=REPO, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert done.returncode == 2, done.stderr

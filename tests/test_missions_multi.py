@@ -7,13 +7,13 @@ from pathlib import Path
 
 import pytest
 
-from controller.missions.benchmark import BenchmarkConfig, benchmark_missions, format_summary, run_benchmark
+from controller.benchmarks.missions import BenchmarkConfig, benchmark_missions, format_summary, run_benchmark
 from controller.missions.results import judge, wrong_target
 from controller.missions.schema import MissionFileError, load_mission, parse_mission
 from controller.missions.setup import scene_config_for
 from controller.planning.grounding import parse_instruction
 from controller.planning.loop_records import Outcome
-from core.targets import colour_name
+from drone_inspect_core.targets import colour_name
 from sim_world.scene.config import DEFAULT_SCENE
 from sim_world.scene.sampling import sample_scene
 

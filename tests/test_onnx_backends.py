@@ -18,16 +18,16 @@ import pytest
 import torch
 from latent_synthetic import write_synthetic_dataset
 
-import core.onnx_runtime as onnx_runtime
+import drone_inspect_core.onnx_runtime as onnx_runtime
 import tools.bench_inference as bench_inference
 from controller.planning.latent.checkpoint import save_checkpoint
 from controller.planning.latent.config import PRESETS
-from controller.planning.latent.instructions import tokenizer_corpus
+from controller.training.instructions import tokenizer_corpus
 from controller.planning.latent.model import LatentDynamicsModel
 from controller.planning.latent.planner import LatentPlanner
 from controller.planning.latent.tokenizer import InstructionTokenizer
 from controller.planning.planners import DEFAULT_CHECKPOINT
-from core.onnx_runtime import OnnxBackendError
+from drone_inspect_core.onnx_runtime import OnnxBackendError
 from perception.image_detector import ImageDetector
 
 pytest.importorskip("onnxruntime")

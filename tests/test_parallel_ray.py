@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from controller.missions.benchmark import BenchmarkConfig, run_benchmark
-from core.parallel import LOCAL, gather, task_executor
+from controller.benchmarks.missions import BenchmarkConfig, run_benchmark
+from drone_inspect_core.parallel import LOCAL, gather, task_executor
 
 pytest.importorskip("ray", reason="the [distributed] extra (ray) is not installed")
 
@@ -24,7 +24,7 @@ pytest.importorskip("ray", reason="the [distributed] extra (ray) is not installe
 @pytest.fixture(scope="module")
 def ray_address():
     """One private 2-CPU Ray head for the tests that join a cluster by address (`--ray ADDRESS`)."""
-    from core.parallel import LocalRayHead, _refresh_ray_auth
+    from drone_inspect_core.parallel import LocalRayHead, _refresh_ray_auth
 
     head = LocalRayHead(2).start()
     saved = {name: os.environ.get(name) for name in head.auth_env}
@@ -107,7 +107,7 @@ def test_collection_on_a_ray_cluster_writes_the_same_dataset(tmp_path: Path, ray
 def test_the_private_ray_head_dies_with_its_run_even_on_sigkill(tmp_path: Path) -> None:
     script = (
         "import time\n"
-        "from core.parallel import RayExecutor\n"
+        "from drone_inspect_core.parallel import RayExecutor\n"
         "pool = RayExecutor('local', 1)\n"
         "print('TEMP', pool._head.temp_dir, flush=True)\n"
         "time.sleep(120)\n"
@@ -121,7 +121,7 @@ def test_the_private_ray_head_dies_with_its_run_even_on_sigkill(tmp_path: Path) 
         temp_dir = line.split(None, 1)[1].strip()
         # Ray's processes (GCS, raylet, agents, workers) share the session of `ray start`, which
         # names the temp folder on its command line; workers retitle themselves ("ray::IDLE").
-        sessions = {sid for _, sid, args in _ps() if temp_dir in args and "core.ray_head" not in args}
+        sessions = {sid for _, sid, args in _ps() if temp_dir in args and "drone_inspect_core.ray_head" not in args}
         assert sessions, "the head should be up"
 
         def left() -> list[str]:
@@ -146,7 +146,7 @@ def test_reproduce_on_a_ray_cluster_gives_the_numbers_of_local_processes(
 ) -> None:
     from latent_synthetic import write_synthetic_dataset
 
-    from controller.planning.latent.reproduce import reproduce
+    from controller.evaluation.reproduce import reproduce
 
     data = write_synthetic_dataset(tmp_path / "data", n_train=120, n_test=60, size=64)
 

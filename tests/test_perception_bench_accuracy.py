@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from core.stats import Rate, quantile_interval, wilson_interval
-from perception.bench_accuracy import TEST_FIRST_SEED, VALIDATION_FIRST_SEED, multi_target_figures
+from drone_inspect_core.stats import Rate, quantile_interval, wilson_interval
+from controller.benchmarks.perception_accuracy import TEST_FIRST_SEED, VALIDATION_FIRST_SEED, multi_target_figures
 from perception.image_detector import SHIPPED_DIR
-from perception.threshold_tuning import at_threshold, tune_threshold, tuning_scores
+from perception.evaluation.threshold_tuning import at_threshold, tune_threshold, tuning_scores
 from perception.types import Detection
 
 
@@ -78,7 +78,7 @@ def test_multi_target_matching_counts_every_fully_visible_target() -> None:
 
 @pytest.mark.timeout(300)
 def test_tiny_bench_writes_intervals_and_tunes_on_validation_only(tmp_path: Path) -> None:
-    from perception.bench_accuracy import AccuracySampleSizes, run_accuracy_bench
+    from controller.benchmarks.perception_accuracy import AccuracySampleSizes, run_accuracy_bench
     from tools.bench_perception import main
 
     out = tmp_path / "bench.json"

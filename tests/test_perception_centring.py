@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from controller.planning.actions import label_from_offset
-from core.centring import default_epsilon_px, is_centred, offset_px
+from drone_inspect_core.centring import default_epsilon_px, is_centred, offset_px
 from perception.types import Detection
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from core.targets import ATTRIBUTE_COLOURS, colour_name
+from drone_inspect_core.targets import ATTRIBUTE_COLOURS, colour_name
 from perception.attributes import read_attribute
 from perception.detector_model import CentreNet, DetectorConfig
 from perception.image_detector import ImageDetector

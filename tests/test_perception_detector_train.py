@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import torch
 
-from core.dataset import DatasetError
+from drone_inspect_core.dataset import DatasetError
 from perception.detector_model import DetectorConfig
-from perception.detector_train import TrainDetectorConfig, train_detector
+from perception.training.train import TrainDetectorConfig, train_detector
 from perception.image_detector import ImageDetector
 
 SIZE = 64

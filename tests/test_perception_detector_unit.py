@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from perception.detector_data import make_targets
+from perception.training.data import make_targets
 from perception.detector_model import EDGE_SCALE_PX, CentreNet, DetectorConfig, fuse_for_inference
 from perception.errors import DetectorCheckpointError
 from perception.image_detector import ImageDetector, load_model, normalise, save_checkpoint

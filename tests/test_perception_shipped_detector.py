@@ -15,9 +15,9 @@ import pytest
 import torch
 
 from controller.planning.actions import label_from_offset
-from core.centring import is_centred, offset_px
-from core.dataset import load_manifest
-from perception.detector_eval import evaluate_on_dataset, read_image_rgb
+from drone_inspect_core.centring import is_centred, offset_px
+from drone_inspect_core.dataset import load_manifest
+from perception.evaluation.evaluate import evaluate_on_dataset, read_image_rgb
 from perception.image_detector import ImageDetector
 from sim_world.collection.collect import CollectConfig, collect
 from sim_world.collection.plan import View, drone_pose_for_view

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.centring import offset_px
+from drone_inspect_core.centring import offset_px
 from perception.detector import TruthDetector
 from perception.errors import CameraClosedError
 from perception.sim_camera import SimCamera

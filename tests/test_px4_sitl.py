@@ -118,7 +118,7 @@ def test_a_px4_sitl_mission_is_centred(tmp_path: Path) -> None:
 def _fly_until_airborne(out: Path) -> tuple[subprocess.Popen[str], dict]:
     """`dronectl fly` on the PX4 mission in a subprocess, returned once the loop has taken a step."""
     command = [
-        sys.executable, "-m", "tools.dronectl", "fly", "--mission", str(PX4_MISSION), "--px4", str(PX4_DIR),
+        sys.executable, "-m", "dronectl", "fly", "--mission", str(PX4_MISSION), "--px4", str(PX4_DIR),
         "--px4-speed", "max", "--out", str(out),
     ]  # fmt: skip
     process = subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

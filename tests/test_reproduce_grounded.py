@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from latent_synthetic import write_synthetic_dataset
 
-from controller.planning.latent.reproduce_grounded import (
+from controller.evaluation.reproduce_grounded import (
     LOOK,
     look_gap,
     named_test_sets,

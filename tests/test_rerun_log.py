@@ -120,7 +120,7 @@ def test_a_failing_recording_never_costs_the_flight(tmp_path: Path, monkeypatch:
 
 
 def test_benchmark_missions_record_each_mission_in_its_report_folder(tmp_path: Path) -> None:
-    from controller.missions.benchmark import MISSION_RRD, BenchmarkConfig, run_benchmark
+    from controller.benchmarks.missions import MISSION_RRD, BenchmarkConfig, run_benchmark
 
     summary = run_benchmark(
         BenchmarkConfig(n=2, seed=3, planners=("classic",), rerun=True), report_dir=tmp_path / "b"

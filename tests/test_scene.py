@@ -13,7 +13,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from core.frames import yaw_enu_to_ned_rad
+from drone_inspect_core.frames import yaw_enu_to_ned_rad
 from sim_world.scene.assets import AssetCache
 from sim_world.scene.bodies import BodyBuilder, Part
 from sim_world.scene.builder import Scene

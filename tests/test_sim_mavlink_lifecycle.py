@@ -34,7 +34,7 @@ def _mission_file(tmp_path: Path) -> Path:
 
 
 def _fly(tmp_path: Path, out: Path) -> subprocess.Popen[str]:
-    command = [sys.executable, "-m", "tools.dronectl", "fly", "--mission", str(_mission_file(tmp_path)),
+    command = [sys.executable, "-m", "dronectl", "fly", "--mission", str(_mission_file(tmp_path)),
                "--out", str(out)]  # fmt: skip
     return subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 

@@ -22,7 +22,7 @@ from sim_world.vehicle.server import SimVehicle
 from sim_world.vehicle.world_model import WorldVehicleModel
 from sim_world.world import World, WorldConfig
 
-DRONECTL = [sys.executable, "-m", "tools.dronectl", "sim-vehicle"]
+DRONECTL = [sys.executable, "-m", "dronectl", "sim-vehicle"]
 
 
 def test_dronectl_sim_vehicle_serves_heartbeats_and_stops_cleanly_on_sigterm():

@@ -19,7 +19,7 @@ LOCAL_PORT, REMOTE_PORT, VIDEO_PORT = 14890, 14891, 18890
 
 def test_sigterm_to_the_process_group_stops_sim_vehicle_with_video() -> None:
     command = [
-        sys.executable, "-m", "tools.dronectl", "sim-vehicle", "--local-port", str(LOCAL_PORT),
+        sys.executable, "-m", "dronectl", "sim-vehicle", "--local-port", str(LOCAL_PORT),
         "--remote-port", str(REMOTE_PORT), "--video-port", str(VIDEO_PORT), "--status-every", "0",
         "--size", "64", "--video-fps", "5",
     ]  # fmt: skip

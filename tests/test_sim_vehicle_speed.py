@@ -18,9 +18,9 @@ from sim_vehicle_fakes import FakeVehicleModel
 from sim_vehicle_process import SimVehicleOptions, SimVehicleProcess
 from test_sim_vehicle_udp import sim, take_off, wait_mode
 
-from controller.missions.benchmark_plan import BenchmarkConfig, benchmark_missions
+from controller.benchmarks.mission_plan import BenchmarkConfig, benchmark_missions
 from controller.missions.schema import MissionFileError, parse_mission
-from core.sim_speed import parse_sim_speed
+from drone_inspect_core.sim_speed import parse_sim_speed
 from sim_world.vehicle import px4_modes as modes
 from sim_world.vehicle.commander import Commander, CommanderConfig, FailsafeStage
 from sim_world.vehicle.config import SimVehicleConfig
@@ -137,7 +137,7 @@ def test_a_sim_mavlink_mission_at_x8_centres(tmp_path: Path) -> None:
     out = tmp_path / "out"
     started = time.monotonic()
     done = subprocess.run(
-        [sys.executable, "-m", "tools.dronectl", "fly", "--mission", str(mission), "--out", str(out)],
+        [sys.executable, "-m", "dronectl", "fly", "--mission", str(mission), "--out", str(out)],
         cwd=REPO, capture_output=True, text=True, timeout=180,
     )  # fmt: skip
     wall_s = time.monotonic() - started

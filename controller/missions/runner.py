@@ -41,7 +41,7 @@ from controller.planning.loop_records import (
     count_refinements,
     count_second_choices,
 )
-from core.centring import default_epsilon_px
+from drone_inspect_core.centring import default_epsilon_px
 from flight.moves import take_off_to_start
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, flight_guard

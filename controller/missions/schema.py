@@ -58,9 +58,9 @@ from pydantic import (
 
 from controller.missions.schema_specs import ArduPilotSpec, AutopilotName, FaultSpec, PortSpec, Px4Spec
 from controller.planning.grounding import parse_instruction
-from core.config_files import ConfigFileError, Range, StrictModel, read_yaml, validate_mapping
-from core.sim_speed import parse_sim_speed
-from core.targets import ATTRIBUTE_COLOURS
+from drone_inspect_core.config_files import ConfigFileError, Range, StrictModel, read_yaml, validate_mapping
+from drone_inspect_core.sim_speed import parse_sim_speed
+from drone_inspect_core.targets import ATTRIBUTE_COLOURS
 from flight.errors import ConnectionUrlError
 from flight.urls import validate_connection_url
 
@@ -217,7 +217,7 @@ class Mission(StrictModel):
     twins: bool = False
     """One other target has the named target's kind, in another trim colour (needs targets >= 2)."""
     target_attribute: str | None = None
-    """The named target's trim colour (a name of `core.targets.ATTRIBUTE_COLOURS`); None: drawn."""
+    """The named target's trim colour (a name of `drone_inspect_core.targets.ATTRIBUTE_COLOURS`); None: drawn."""
     start: Start = StartOffset()
     instruction: str | None = None
     """None: resolved from the built scene, "center the <kind>" ("center the <colour> <kind>" when the

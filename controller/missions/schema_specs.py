@@ -7,7 +7,7 @@ from typing import Literal
 
 from pydantic import Field, field_validator
 
-from core.config_files import StrictModel
+from drone_inspect_core.config_files import StrictModel
 
 AutopilotName = Literal["auto", "px4", "ardupilot"]
 """A MAVLink URL's autopilot (`Mission.autopilot`): "auto" (told by its HEARTBEAT), "px4" (flown with MAVSDK)

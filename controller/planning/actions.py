@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
-from core.centring import axis_signs
+from drone_inspect_core.centring import axis_signs
 
 
 class XMove(IntEnum):
@@ -66,5 +66,5 @@ MIRRORED_INDEX: tuple[int, ...] = tuple(3 * (2 - i // 3) + i % 3 for i in range(
 
 def label_from_offset(du_px: float, dv_px: float, epsilon_px: float) -> Action:
     """The correct action for a target at offset (du, dv) from the image centre."""
-    sx, sz = axis_signs(du_px, dv_px, epsilon_px)  # the ε rule (core.centring), written once
+    sx, sz = axis_signs(du_px, dv_px, epsilon_px)  # the ε rule (drone_inspect_core.centring), written once
     return Action(XMove(sx + 1), ZMove(1 - sz))

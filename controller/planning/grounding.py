@@ -26,7 +26,7 @@ import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from core.targets import ATTRIBUTE_COLOURS, TARGET_KINDS
+from drone_inspect_core.targets import ATTRIBUTE_COLOURS, TARGET_KINDS
 from perception.types import Detection
 
 KIND_SYNONYMS: dict[str, tuple[str, ...]] = {
@@ -54,7 +54,7 @@ COLOUR_WORDS: dict[str, tuple[str, ...]] = {
     "blue": ("blue", "navy"),
     "yellow": ("yellow", "gold", "golden", "amber"),
 }
-"""Every word that names an attribute colour (`core.targets.ATTRIBUTE_COLOURS`)."""
+"""Every word that names an attribute colour (`drone_inspect_core.targets.ATTRIBUTE_COLOURS`)."""
 
 
 @dataclass(frozen=True)

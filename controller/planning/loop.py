@@ -101,7 +101,7 @@ from controller.planning.loop_records import (
     TruthProbe,
 )
 from controller.planning.planners import Observation, Plan, Planner
-from core.centring import default_stop_margin_px, is_centred, offset_px
+from drone_inspect_core.centring import default_stop_margin_px, is_centred, offset_px
 from flight.moves import MoveResult, fly_offset
 from flight.vehicle import Deadline, Vehicle
 from perception.camera import Camera

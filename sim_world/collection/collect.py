@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from core.dataset import (
+from drone_inspect_core.dataset import (
     DATASET_JSON,
     GENERATOR_VERSION,
     IMAGES_DIR,
@@ -29,8 +29,8 @@ from core.dataset import (
     prepare_output_dir,
     write_json_atomic,
 )
-from core.frames import enu_to_ned, yaw_enu_to_ned_rad
-from core.parallel import task_executor
+from drone_inspect_core.frames import enu_to_ned, yaw_enu_to_ned_rad
+from drone_inspect_core.parallel import task_executor
 from sim_world.collection.plan import (
     CollectConfig,
     CollectionPlan,
@@ -254,7 +254,7 @@ def collect(
     `plan`: the images to render (default `plan_collection(cfg)`; `plan_held_out` for a sample
     of test and empty images on chosen scene seeds).
 
-    `ray` (`core.parallel`): render the chunks of scenes on Ray ("local" or a cluster's address)
+    `ray` (`drone_inspect_core.parallel`): render the chunks of scenes on Ray ("local" or a cluster's address)
     instead of local processes. A chunk that fails (a crashed worker) is named by its scene seeds
     after the others have been written; the dataset then holds the others and is marked incomplete.
     """

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import cv2
 
-from core.frames import enu_to_ned
+from drone_inspect_core.frames import enu_to_ned
 from sim_world.world import World, WorldConfig
 
 logger = logging.getLogger(__name__)

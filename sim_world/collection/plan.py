@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from core.centring import axis_signs, default_epsilon_px
+from drone_inspect_core.centring import axis_signs, default_epsilon_px
 from sim_world.physics.quadrotor import RigidBodyState
 from sim_world.rendering.camera import CameraConfig, ForwardCamera, Intrinsics
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfig
@@ -44,7 +44,7 @@ SECTORS = tuple(SECTOR_DIRECTIONS)
 
 def sector_of_offset(du_px: float, dv_px: float, epsilon_px: float) -> str:
     """The sector of an offset under the ε bands ('centre' when within ε on both axes)."""
-    sx, sz = axis_signs(du_px, dv_px, epsilon_px)  # the ε rule (core.centring), written once
+    sx, sz = axis_signs(du_px, dv_px, epsilon_px)  # the ε rule (drone_inspect_core.centring), written once
     if sx == 0 and sz == 0:
         return "centre"
     return next(name for name, d in SECTOR_DIRECTIONS.items() if d == (sx, sz))

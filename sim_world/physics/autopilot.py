@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from core.frames import heading_to_world_ned, ned_to_enu, wrap_rad, yaw_enu_to_ned_rad
+from drone_inspect_core.frames import heading_to_world_ned, ned_to_enu, wrap_rad, yaw_enu_to_ned_rad
 from sim_world.physics.autopilot_control import (
     AttitudeController,
     AutopilotParams,

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pybullet as p
 
-from core.frames import enu_to_ned, yaw_enu_to_ned_rad
+from drone_inspect_core.frames import enu_to_ned, yaw_enu_to_ned_rad
 from sim_world.rendering.mjpeg import MjpegServer
 from sim_world.world import World, WorldConfig
 

@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 import pybullet as p
 
-from core.frames import wrap_rad
-from core.targets import colour_name
+from drone_inspect_core.frames import wrap_rad
+from drone_inspect_core.targets import colour_name
 from sim_world.rendering.camera import Lighting
 from sim_world.scene.assets import AssetCache
 from sim_world.scene.bodies import BodyBuilder
@@ -40,9 +40,9 @@ class SceneTarget:
     """One inspection target as built: what an instruction calls it and where it is."""
 
     kind: str
-    """"gauge", "valve" or "switchbox" (`core.targets.TARGET_KINDS`)."""
+    """"gauge", "valve" or "switchbox" (`drone_inspect_core.targets.TARGET_KINDS`)."""
     attribute: str
-    """The trim colour's name (`core.targets.colour_name` of its bezel colour): "red", "blue", ..."""
+    """The trim colour's name (`drone_inspect_core.targets.colour_name` of its bezel colour): "red", "blue", ..."""
     body_id: int
     """The face only (dial + bezel, handwheel, door): what the segmentation mask counts."""
     centre_enu_m: np.ndarray

@@ -16,7 +16,7 @@ from typing import Annotated, Literal
 from pydantic import AfterValidator, Field, ValidationInfo, field_validator
 
 from core import targets as vocabulary
-from core.config_files import ConfigFileError, StrictModel, check_range, read_yaml, validate_mapping
+from drone_inspect_core.config_files import ConfigFileError, StrictModel, check_range, read_yaml, validate_mapping
 
 TargetKind = Literal["gauge", "valve", "switchbox"]
 WallTexture = Literal["concrete", "brick", "painted_metal"]
@@ -24,7 +24,7 @@ FloorTexture = Literal["concrete", "tiles", "grating"]
 DistractorKind = Literal["dial", "box", "sign"]
 
 TARGET_KINDS: tuple[TargetKind, ...] = ("gauge", "valve", "switchbox")
-assert TARGET_KINDS == vocabulary.TARGET_KINDS, "the scene's target kinds are core.targets' vocabulary"
+assert TARGET_KINDS == vocabulary.TARGET_KINDS, "the scene's target kinds are drone_inspect_core.targets' vocabulary"
 MAX_TARGETS = 4
 """The most targets one scene holds (all of them in view from the named target's centred pose)."""
 
@@ -66,7 +66,7 @@ class TargetConfig(StrictModel):
 
     The first target is the *named* one (what an instruction asks to centre); the others
     stand beside it. Targets of one kind always differ in their trim colour's name
-    (`core.targets.colour_name` of `bezel_colours`), the attribute an instruction names.
+    (`drone_inspect_core.targets.colour_name` of `bezel_colours`), the attribute an instruction names.
     """
 
     kinds: tuple[TargetKind, ...] = Field(default=TARGET_KINDS, min_length=1)
@@ -92,7 +92,7 @@ class TargetConfig(StrictModel):
     twins: bool = False
     """With 2 or more targets: one other target has the named target's kind, in another trim colour."""
     attribute: str | None = None
-    """The named target's trim colour name (`core.targets.ATTRIBUTE_COLOURS`): its trim is drawn from
+    """The named target's trim colour name (`drone_inspect_core.targets.ATTRIBUTE_COLOURS`): its trim is drawn from
     the `bezel_colours` of that name (that colour itself if none has it); None: from all of them."""
     count: IntRange = (1, 1)
     """How many targets on the wall (named one included), 1..4. Last, so that its check sees the rest."""

@@ -5,7 +5,7 @@ target stream exactly as a single-target scene always was. With `target.count` a
 one, the other targets are drawn from a stream of their own (so nothing else in the
 scene moves), beside the named one so that all are in view from its centred pose,
 with kinds distinct where `other_kinds` allows and, for two of one kind, trim colours
-of different names (`core.targets.colour_name`): the attribute an instruction names.
+of different names (`drone_inspect_core.targets.colour_name`): the attribute an instruction names.
 Every target then gets a local mount (a short pipe, or a switch box's conduit), so the
 named one is not told by its mount; no mount crosses another target's face.
 """
@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from core.targets import colour_name
+from drone_inspect_core.targets import colour_name
 from sim_world.scene.config import SceneConfig
 from sim_world.scene.textures_targets import GAUGE_SCALES, SWITCHBOX_LABELS
 

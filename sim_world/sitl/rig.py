@@ -15,7 +15,7 @@ from collections.abc import Callable
 import numpy as np
 import pybullet as p
 
-from core.frames import enu_to_ned
+from drone_inspect_core.frames import enu_to_ned
 from sim_world.physics.quadrotor import QuadrotorParams
 from sim_world.physics.wind import WindConfig
 from sim_world.rendering.camera import CameraConfig

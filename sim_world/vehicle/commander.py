@@ -39,7 +39,7 @@ from enum import Enum
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from core.frames import wrap_rad
+from drone_inspect_core.frames import wrap_rad
 from sim_world.vehicle import px4_modes as modes
 from sim_world.vehicle.model import ModelRefused, VehicleModel
 from sim_world.vehicle.params import ParameterStore

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from core.sim_speed import MAX_SPEED, SimSpeed, parse_sim_speed
+from drone_inspect_core.sim_speed import MAX_SPEED, SimSpeed, parse_sim_speed
 from sim_world.vehicle.battery import BatteryConfig
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.telemetry import HomePoint

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from core.frames import enu_to_ned, flu_to_frd, yaw_enu_to_ned_rad
+from drone_inspect_core.frames import enu_to_ned, flu_to_frd, yaw_enu_to_ned_rad
 from sim_world.physics.autopilot import AutopilotError, AutopilotMode
 from sim_world.vehicle.model import AutopilotStatus, Kinematics, ModelRefused
 from sim_world.world import World

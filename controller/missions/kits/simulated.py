@@ -23,7 +23,7 @@ from controller.missions.kits.base import (
 )
 from controller.missions.schema import Mission, StartOffset
 from controller.missions.setup import scene_config_for, wind_config_for
-from core.targets import colour_name
+from drone_inspect_core.targets import colour_name
 from flight.vehicle import Vehicle
 from perception.stream_camera import StreamCamera
 from sim_world.rendering.camera import CameraConfig

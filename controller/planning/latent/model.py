@@ -23,7 +23,7 @@ from torch import nn
 from controller.planning.actions import NUM_ACTIONS
 from controller.planning.latent.config import ModelConfig
 from controller.planning.latent.image_encoder import ImageEncoder
-from controller.planning.latent.losses import distance
+from controller.training.losses import distance
 from controller.planning.latent.text_encoder import TextEncoder
 
 # (9,) axis indices of every joint action, in Action.index order (index = 3·x + z).

@@ -31,7 +31,7 @@ from controller.planning.latent.checkpoint import load_checkpoint
 from controller.planning.latent.errors import ImageInputError
 from controller.planning.latent.image_encoder import fused_for_inference
 from controller.planning.latent.step_graph import StepGraph, export_step
-from core.onnx_runtime import onnx_for
+from drone_inspect_core.onnx_runtime import onnx_for
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ import torch
 from torch import nn
 
 from controller.planning.latent.model import LatentDynamicsModel
-from core.onnx_runtime import OnnxModule
+from drone_inspect_core.onnx_runtime import OnnxModule
 
 INPUTS = ("image", "text", "goal")
 

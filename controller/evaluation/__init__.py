@@ -1,0 +1,1 @@
+"""Research: evaluating the latent planner (accuracy, presence, the paper's experiments, plots, the Gymnasium task)."""

@@ -1,0 +1,1 @@
+"""Research: training the latent planner (data, augmentation, losses, the training loop)."""

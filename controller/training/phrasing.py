@@ -1,0 +1,152 @@
+"""How an instruction names its target: kind synonyms and trim colours, split between training and held-out.
+
+An instruction is a template from `instructions/*.txt` with its `{target}` slot filled by a
+noun phrase for one target: a synonym of its kind, with its trim colour in front where the
+colour is needed to tell it from another target of the same kind ("the red valve") and,
+in training, sometimes where it is not. The synonyms are split: `train` ones are the only
+ones the model (and its tokenizer) ever sees in training; `heldout` ones are new
+combinations of the same words ("pressure dial", "valve wheel", "electrical panel"), so
+evaluating with them measures whether the model grounds the words rather than memorises
+the phrases. A word the training text never held cannot be grounded by a text encoder
+trained from scratch; add such words to the training synonyms (docs/reproduce/README.md).
+
+`kind: phrase` instruction files (`dronectl evaluate --instructions FILE`) pair each test
+image with a phrase written for its named target's kind (`read_kind_phrases`).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from controller.planning.latent.errors import InstructionError
+from drone_inspect_core.targets import ATTRIBUTE_COLOURS, TARGET_KINDS
+
+SLOT = "{target}"
+
+SYNONYMS: dict[str, dict[str, tuple[str, ...]]] = {
+    "fixed": {"gauge": ("gauge",), "valve": ("valve",), "switchbox": ("switch box",)},
+    "train": {
+        "gauge": ("gauge", "pressure gauge", "dial"),
+        "valve": ("valve", "handwheel", "wheel valve"),
+        "switchbox": ("switch box", "electrical box", "control panel"),
+    },
+    "heldout": {
+        "gauge": ("pressure dial", "dial gauge"),
+        "valve": ("valve wheel", "valve handwheel"),
+        "switchbox": ("electrical panel", "control box"),
+    },
+}
+"""Noun phrases per kind and corpus; `heldout` never reaches training."""
+
+COLOURS: tuple[str, ...] = tuple(ATTRIBUTE_COLOURS)
+
+
+@dataclass(frozen=True)
+class TargetName:
+    """What an instruction asks for: a kind, and the trim colour when it names one."""
+
+    kind: str
+    attribute: str | None = None
+
+
+def noun_phrase(name: TargetName, synonym: str) -> str:
+    """'red valve' / 'handwheel': the colour (if any) before the synonym."""
+    return f"{name.attribute} {synonym}" if name.attribute else synonym
+
+
+def fill_phrase(template: str, phrase: str) -> str:
+    """The template with its `{target}` slot filled (a template without a slot is returned as is)."""
+    return template.replace(SLOT, phrase)
+
+
+def synonyms(kind: str, corpus: str) -> tuple[str, ...]:
+    """The synonyms of `kind` in `corpus` ("fixed", "train" or "heldout")."""
+    try:
+        table = SYNONYMS[corpus]
+    except KeyError:
+        raise InstructionError(
+            f"unknown synonym corpus {corpus!r}; choose one of {sorted(SYNONYMS)}"
+        ) from None
+    if kind not in table:
+        return (kind.replace("_", " "),)
+    return table[kind]
+
+
+def describe(name: TargetName, templates: Sequence[str], corpus: str, rng: np.random.Generator) -> str:
+    """One instruction naming `name`: a random template and a random synonym of its kind."""
+    template = templates[int(rng.integers(len(templates)))]
+    options = synonyms(name.kind, corpus)
+    return fill_phrase(template, noun_phrase(name, options[int(rng.integers(len(options)))]))
+
+
+PhraseKey = tuple[str, str | None, int, int]
+"""(kind, colour or None, synonym index, template index) of one instruction."""
+
+
+def phrasing_table(templates: Sequence[str], corpus: str) -> list[tuple[PhraseKey, str]]:
+    """Every instruction of `templates` × kinds × synonyms × (no colour, each colour), with its key.
+
+    The described model's tokenizer corpus, and the table its training sampler draws from."""
+    out = []
+    for kind in TARGET_KINDS:
+        for s, synonym in enumerate(synonyms(kind, corpus)):
+            for attribute in (None, *COLOURS):
+                phrase = noun_phrase(TargetName(kind, attribute), synonym)
+                out.extend(
+                    ((kind, attribute, s, t), fill_phrase(tpl, phrase)) for t, tpl in enumerate(templates)
+                )
+    return out
+
+
+def all_phrasings(templates: Sequence[str], corpus: str) -> list[str]:
+    """The texts of `phrasing_table`: the tokenizer's corpus for a model trained on described targets."""
+    return [text for _, text in phrasing_table(templates, corpus)]
+
+
+_KIND_LINE = re.compile(r"^\s*([A-Za-z_ ]+?)\s*:\s*(.+?)\s*$")
+
+
+def read_kind_phrases(path: Path) -> dict[str, list[str]]:
+    """A `kind: phrase` file: one instruction per line for the named kind (`#` comments, blank lines skipped).
+
+    A phrase may hold a `{target}` slot (filled with the kind's name then). Every kind must be
+    a known target kind; InstructionError names the file and line otherwise.
+    """
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InstructionError(f"cannot read instruction file {path}: {exc}") from exc
+    phrases: dict[str, list[str]] = {}
+    for number, line in enumerate(text.splitlines(), start=1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        match = _KIND_LINE.match(line)
+        if match is None:
+            raise InstructionError(f"{path}:{number}: expected 'kind: phrase', got {line.strip()!r}")
+        kind = match.group(1).strip().replace(" ", "").lower()
+        if kind not in TARGET_KINDS:
+            raise InstructionError(
+                f"{path}:{number}: unknown target kind {match.group(1)!r}; use {TARGET_KINDS}"
+            )
+        phrases.setdefault(kind, []).append(match.group(2))
+    if not phrases:
+        raise InstructionError(f"instruction file {path} holds no 'kind: phrase' lines")
+    return phrases
+
+
+def is_kind_phrase_file(path: Path) -> bool:
+    """Whether the first instruction line of `path` reads `kind: phrase` with a known kind."""
+    try:
+        lines = Path(path).read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError):
+        return False
+    for line in lines:
+        if line.strip() and not line.lstrip().startswith("#"):
+            match = _KIND_LINE.match(line)
+            return bool(match) and match.group(1).strip().replace(" ", "").lower() in TARGET_KINDS
+    return False

@@ -1,0 +1,1 @@
+"""Research: the image detector's accuracy and its score threshold."""

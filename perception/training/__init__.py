@@ -1,0 +1,1 @@
+"""Research: training the image detector (its data and training loop)."""

@@ -1,0 +1,40 @@
+"""`dronectl bench sim|perception|inference|flight|px4|ardupilot [options]`: the speed benchmarks.
+
+Each benchmark's measuring code lives with the code it measures (`controller.benchmarks.sim`,
+`controller.benchmarks.flight`, `controller.benchmarks.px4`, `controller.benchmarks.ardupilot`, `controller.benchmarks.perception`); its command line is a
+`tools/bench_<name>.py` with `main(argv) -> int`. This command only picks the module
+(imported lazily, so one benchmark never pays for another's imports) and hands it the
+rest of the command line. `dronectl bench <name> --help` shows a benchmark's options.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+BENCHMARKS: dict[str, tuple[str, str]] = {
+    "sim": ("tools.bench_sim", "physics and camera real-time factors, render times, collection throughput"),
+    "perception": ("tools.bench_perception", "detector latency, stream-camera latency, detector accuracy"),
+    "inference": ("tools.bench_inference", "planner and detector on torch and on ONNX Runtime, side by side"),
+    "flight": ("tools.bench_flight", "vehicle command and telemetry latency"),
+    "px4": ("tools.bench_px4", "real PX4 SITL in lockstep: readiness, hover drift, lockstep speed"),
+    "ardupilot": ("tools.bench_ardupilot", "real ArduCopter SITL in lockstep: readiness, hover drift, speed"),
+}
+
+
+def _usage() -> str:
+    lines = ["usage: dronectl bench <benchmark> [options]", "", "benchmarks:"]
+    lines += [f"  {name:<11} {help_}" for name, (_, help_) in BENCHMARKS.items()]
+    return "\n".join(lines)
+
+
+def main(argv: list[str]) -> int:
+    if not argv or argv[0] in ("-h", "--help"):
+        print(_usage())
+        return 0
+    name, rest = argv[0], argv[1:]
+    if name not in BENCHMARKS:
+        print(f"dronectl bench: unknown benchmark {name!r}\n\n{_usage()}", file=sys.stderr)
+        return 2
+    module = importlib.import_module(BENCHMARKS[name][0])
+    return int(module.main(rest) or 0)

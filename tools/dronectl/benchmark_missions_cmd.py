@@ -1,0 +1,210 @@
+"""`dronectl benchmark-missions`: randomised centring missions from unseen scenes, planners side by side.
+
+    dronectl benchmark-missions --n 200 --seed 1 --json runs/bench_missions.json
+    dronectl benchmark-missions --n 20 --seed 1 --vehicle sim-mavlink --planner latent --parallel 2
+    dronectl benchmark-missions --n 50 --targets 3 --twins --absent 0.2 --instructions heldout
+
+Prints success rate, mean steps, mean steps over the oracle's, final offset, the
+loop's boundary refinement moves, loop overhead and wrong-target centrings (the loop
+stopped on another target, per truth; in-process sim only) per planner, and with
+--absent how many absent-target missions ended target_not_found and how many moved;
+--json writes the same plus every mission's row.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from controller.benchmarks.missions import BenchmarkConfig, format_summary, run_benchmark
+from controller.missions.report import ReportFolderError
+from controller.missions.schema import FaultSpec
+from drone_inspect_core.parallel import RayUnavailableError, add_ray_option
+from drone_inspect_core.sim_speed import parse_sim_speed
+from sim_world.ardupilot_bridge.ardupilot_process import ArduPilotFolderError
+from sim_world.px4_bridge.px4_process import Px4FolderError, find_px4_dir
+from tools.ardupilot_options import add_ardupilot_options, resolve_ardupilot_dir
+
+
+def faults_from_args(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The `faults:` mapping of a mission for the fault options given (None when none is)."""
+    link = {
+        "loss": args.link_loss, "latency_ms": args.link_latency_ms, "jitter_ms": args.link_jitter_ms,
+        "duplicate": args.link_duplicate, "reorder": args.link_reorder,
+    }  # fmt: skip
+    camera = {
+        "drop": args.frame_drop, "freeze_at_s": args.camera_freeze_at_s,
+        "freeze_for_s": args.camera_freeze_for_s, "dies_at_s": args.camera_dies_at_s,
+    }  # fmt: skip
+    faults: dict[str, Any] = {}
+    if any(link.values()):
+        faults["link"] = link
+    if camera["drop"] or camera["freeze_at_s"] is not None or camera["dies_at_s"] is not None:
+        faults["camera"] = camera
+    if args.gust_m_s:
+        faults["gust_m_s"] = args.gust_m_s
+    if args.vehicle_dies_at_s is not None:
+        faults["vehicle_dies_at_s"] = args.vehicle_dies_at_s
+    if faults:
+        FaultSpec.model_validate(faults)  # a bad value is named now, not in every mission
+    return faults or None
+
+
+def _speed(option: str, text: str) -> float | str:
+    try:
+        return parse_sim_speed(text)
+    except ValueError as exc:
+        raise ValueError(f"{option}: {exc}") from None
+
+
+def main(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(prog="dronectl benchmark-missions", description=__doc__.splitlines()[0])
+    parser.add_argument("--n", type=int, default=200, help="missions per planner (default: %(default)s)")
+    parser.add_argument("--seed", type=int, default=0, help="benchmark seed: picks the scenes and starts")
+    parser.add_argument(
+        "--planner",
+        default="latent,classic,random,oracle",
+        help="comma-separated planners (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--vehicle",
+        default="sim",
+        choices=("sim", "sim-mavlink", "px4-sitl", "ardupilot-sitl"),
+        help="in-process, the sim-vehicle over MAVLink, or real PX4 / ArduPilot SITL flying the world",
+    )
+    parser.add_argument("--px4", help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
+    parser.add_argument(
+        "--px4-speed", default="max", help="px4-sitl: simulation speed, a factor or 'max' (default: max)"
+    )
+    add_ardupilot_options(parser, speed_default="max")
+    parser.add_argument(
+        "--sim-speed",
+        default="1",
+        help="sim-mavlink: the sim-vehicle's speed, a factor (1 = real time, the default) or 'max'",
+    )
+    parser.add_argument("--checkpoint", help="latent planner checkpoint folder (default: the shipped one)")
+    parser.add_argument("--max-steps", type=int, default=20, help="step budget per mission (default: 20)")
+    parser.add_argument("--epsilon-px", type=float, help="ε in pixels (default: 10 at 224 px)")
+    parser.add_argument(
+        "--detector",
+        default="image",
+        choices=("image", "truth"),
+        help="truth: isolate the planners (sim only)",
+    )
+    parser.add_argument("--detector-checkpoint", help="image detector run folder (default: the shipped one)")
+    parser.add_argument(
+        "--fixed-moves", action="store_true", help="the paper's fixed move lengths instead of scaled ones"
+    )
+    parser.add_argument(
+        "--second-choices",
+        type=int,
+        default=None,
+        help="moves per mission on the planner's best-ranked move after a 'no move' far from centre "
+        "(default: the loop's 4; 0: such a 'no move' is a stall, the planner alone)",
+    )
+    parser.add_argument(
+        "--targets", type=int, default=1, help="targets in every scene, the named one included (1..4)"
+    )
+    parser.add_argument(
+        "--twins", action="store_true", help="one other target of the named kind, in another trim colour"
+    )
+    parser.add_argument(
+        "--instructions",
+        choices=("train", "heldout"),
+        help="the phrases naming the target (default: heldout with --targets/--twins/--absent, "
+        "else 'center the <kind>')",
+    )
+    parser.add_argument(
+        "--absent",
+        type=float,
+        default=0.0,
+        help="fraction of missions whose instruction names a target not in the scene "
+        "(they must end target_not_found)",
+    )
+    faults = parser.add_argument_group("injected faults (sim-mavlink and the SITL vehicles; gusts also sim)")
+    faults.add_argument(
+        "--link-loss", type=float, default=0.0, help="fraction of MAVLink datagrams lost, each way"
+    )
+    faults.add_argument("--link-latency-ms", type=float, default=0.0, help="added one-way latency, ms")
+    faults.add_argument(
+        "--link-jitter-ms", type=float, default=0.0, help="± uniform jitter on that latency, ms"
+    )
+    faults.add_argument("--link-duplicate", type=float, default=0.0, help="fraction of datagrams sent twice")
+    faults.add_argument(
+        "--link-reorder", type=float, default=0.0, help="fraction held back behind later ones"
+    )
+    faults.add_argument("--frame-drop", type=float, default=0.0, help="fraction of camera frames never sent")
+    faults.add_argument("--camera-freeze-at-s", type=float, help="the picture freezes at this simulated time")
+    faults.add_argument("--camera-freeze-for-s", type=float, default=3.0, help="for this long (default 3 s)")
+    faults.add_argument("--camera-dies-at-s", type=float, help="the video stream dies at this simulated time")
+    faults.add_argument(
+        "--gust-m-s", type=float, default=0.0, help="wind gusts, standard deviation per axis, m/s"
+    )
+    faults.add_argument("--vehicle-dies-at-s", type=float, help="the vehicle (or PX4) is killed at this time")
+    parser.add_argument(
+        "--parallel", type=int, default=1, help="worker processes, or the local Ray's CPUs (default: 1)"
+    )
+    add_ray_option(parser)
+    parser.add_argument("--json", type=Path, help="write the summary and every mission's row here")
+    parser.add_argument(
+        "--report", type=Path, help="keep each mission's report.json under this folder (new or empty)"
+    )
+    parser.add_argument(
+        "--rerun",
+        action="store_true",
+        help="with --report: record each mission for the Rerun viewer as <report>/<mission>/mission.rrd",
+    )
+    args = parser.parse_args(argv)
+    if args.rerun:
+        if args.report is None:
+            parser.error("--rerun needs --report (the folder that keeps each mission's recording)")
+        try:
+            import rerun  # noqa: F401
+        except ImportError:
+            print(
+                "dronectl benchmark-missions: --rerun needs the Rerun SDK: pip install -e '.[rerun]'",
+                file=sys.stderr,
+            )
+            return 2
+    logging.getLogger().setLevel(logging.WARNING)
+    try:
+        config = BenchmarkConfig(
+            n=args.n, seed=args.seed, planners=tuple(p.strip() for p in args.planner.split(",") if p.strip()),
+            vehicle=args.vehicle, max_steps=args.max_steps, epsilon_px=args.epsilon_px,
+            checkpoint=args.checkpoint, detector=args.detector, parallel=args.parallel,
+            detector_checkpoint=args.detector_checkpoint, scale_moves=not args.fixed_moves,
+            px4_dir=args.px4, px4_speed=_speed("--px4-speed", args.px4_speed), faults=faults_from_args(args),
+            ardupilot_dir=None if args.ardupilot is None else str(args.ardupilot),
+            ardupilot_speed=_speed("--ardupilot-speed", args.ardupilot_speed),
+            sim_speed=_speed("--sim-speed", args.sim_speed),
+            rerun=args.rerun, ray=args.ray, targets=args.targets, twins=args.twins,
+            instructions=args.instructions, absent=args.absent, second_choices=args.second_choices,
+        )  # fmt: skip
+        if config.vehicle == "px4-sitl":  # a missing PX4 folder is named before anything flies
+            config = replace(config, px4_dir=str(find_px4_dir(config.px4_dir)))
+        if config.vehicle == "ardupilot-sitl":  # so is a missing ArduPilot folder
+            config = replace(config, ardupilot_dir=resolve_ardupilot_dir(config.ardupilot_dir))
+    except (Px4FolderError, ArduPilotFolderError) as exc:
+        print(f"dronectl benchmark-missions: {exc}", file=sys.stderr)
+        return 2
+    except ValueError as exc:
+        parser.error(str(exc))
+    try:
+        summary = run_benchmark(config, report_dir=args.report)
+    except ReportFolderError as exc:
+        print(f"dronectl benchmark-missions: --report {exc}", file=sys.stderr)
+        return 2
+    except RayUnavailableError as exc:
+        print(f"dronectl benchmark-missions: {exc}", file=sys.stderr)
+        return 2
+    print(format_summary(summary))
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(summary, indent=1))
+        print(f"wrote {args.json}", file=sys.stderr)
+    return 0

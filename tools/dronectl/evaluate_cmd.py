@@ -1,0 +1,92 @@
+"""`dronectl evaluate`: rank-1, per-axis accuracy and confusion matrix of a trained planner."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+from controller.planning.actions import ALL_ACTIONS
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="dronectl evaluate", description=__doc__)
+    p.add_argument("--model", type=Path, required=True, help="checkpoint folder written by `dronectl train`")
+    p.add_argument("--data", type=Path, required=True, help="dataset folder")
+    p.add_argument(
+        "--instructions",
+        default="train",
+        help="train (training-style), heldout (never-seen paraphrases and synonyms) or a text FILE: "
+        "one instruction per line ({target} filled with the target's name), or `kind: phrase` lines "
+        "(each test image gets a phrase of its named target's kind)",
+    )
+    p.add_argument(
+        "--split", default="test", choices=("test", "train", "goal"), help="dataset split to score"
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the image/instruction pairing")
+    p.add_argument("--epsilon-px", type=float, default=None, help="ε in dataset pixels (default 10 at 224)")
+    p.add_argument(
+        "--latency", type=int, default=0, metavar="N", help="also time N planner decisions on the test images"
+    )
+    p.add_argument("--threads", type=int, default=1, help="threads for the latency measurement")
+    p.add_argument(
+        "--backend",
+        default="auto",
+        choices=("torch", "onnx", "auto"),
+        help="planner backend for the latency measurement (auto: onnx when onnxruntime is installed)",
+    )
+    p.add_argument(
+        "--mirror-tta",
+        action="store_true",
+        help="score each image with its left-right mirror image too (test-time augmentation, as the "
+        "planner does where its checkpoint's config.json says planner.mirror_tta)",
+    )
+    p.add_argument("--json", type=Path, default=None, help="also write the full result as JSON here")
+    return p
+
+
+def main(argv: list[str]) -> int:
+    args = build_parser().parse_args(argv)
+    from controller.evaluation.evaluate import evaluate_checkpoint
+
+    result = evaluate_checkpoint(
+        args.model, args.data, args.instructions, args.split, args.epsilon_px, args.seed, args.mirror_tta
+    )
+    print(f"images: {result.n}   instructions: {result.instructions}")
+    print(f"rank-1 accuracy: {100 * result.rank1:.2f}%")
+    print(f"X accuracy: {100 * result.x_accuracy:.2f}%   Z accuracy: {100 * result.z_accuracy:.2f}%")
+    names = [a.name for a in ALL_ACTIONS]
+    print("confusion (rows: true, columns: predicted)")
+    print(" " * 12 + " ".join(f"{n:>11}" for n in names))
+    for name, row in zip(names, result.confusion, strict=True):
+        print(f"{name:>11} " + " ".join(f"{v:>11}" for v in row))
+    if len(result.by_targets_in_view) > 1:
+        parts = [
+            f"{k} in view: {100 * g['rank1']:.2f}% of {g['n']}" for k, g in result.by_targets_in_view.items()
+        ]
+        print("rank-1 by targets in view: " + ", ".join(parts))
+    if result.presence is not None:
+        pr = result.presence
+        print(
+            f"not in view: AUROC {pr['auroc']:.4f}, accuracy {100 * pr['accuracy']:.2f}% "
+            f"({pr['n_present']} present, {pr['n_absent']} absent pairs), "
+            f"present called absent {100 * pr['false_absent_rate']:.2f}%, "
+            f"absent called present {100 * pr['false_present_rate']:.2f}%, "
+            f"mean absent confidence {pr['mean_absent_confidence']:.3f}"
+        )
+    if args.latency > 0:
+        from controller.benchmarks.planner_latency import latency_on_dataset
+
+        load_before = os.getloadavg()[0]
+        lat = latency_on_dataset(args.model, args.data, args.split, args.latency, args.threads, args.backend)
+        print(
+            f"planner latency over {lat.decisions} decisions ({lat.backend}, {args.threads} threads): "
+            f"mean {lat.mean_ms:.2f} ms, p50 {lat.p50_ms:.2f} ms, p99 {lat.p99_ms:.2f} ms, "
+            f"max {lat.max_ms:.2f} ms; load average {load_before:.2f} before, "
+            f"{os.getloadavg()[0]:.2f} after on {os.cpu_count()} CPUs"
+        )
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result.__dict__, indent=1) + "\n")
+    return 0

@@ -1,0 +1,73 @@
+"""`dronectl train-detector`: train the image-based target detector on a collected dataset folder."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import torch
+
+from drone_inspect_core.dataset import DatasetError
+from perception.detector_model import DetectorConfig
+from perception.training.train import TrainDetectorConfig, train_detector
+from perception.errors import PerceptionError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="dronectl train-detector", description=__doc__)
+    p.add_argument("--data", type=Path, required=True, help="dataset folder written by `dronectl collect`")
+    p.add_argument(
+        "--extra",
+        type=Path,
+        action="append",
+        default=[],
+        help="another dataset folder whose rows (all splits) are added to training; rows of "
+        "--data's test scene seeds are dropped (repeatable)",
+    )
+    p.add_argument(
+        "--out", type=Path, required=True, help="run folder for model.safetensors, config.json, metrics"
+    )
+    p.add_argument(
+        "--init", type=Path, default=None, help="start from this run folder's weights (fine-tuning)"
+    )
+    p.add_argument("--epochs", type=int, default=30)
+    p.add_argument("--batch-size", type=int, default=32)
+    p.add_argument("--lr", type=float, default=2e-3)
+    p.add_argument("--crop", type=int, default=128, help="training crop size in pixels (multiple of 32)")
+    p.add_argument(
+        "--val-fraction", type=float, default=0.1, help="share of training rows held out for validation"
+    )
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--threads", type=int, default=2, help="torch threads")
+    p.add_argument("--input-size", type=int, default=224, help="network input size (multiple of 32)")
+    return p
+
+
+def main(argv: list[str]) -> int:
+    args = build_parser().parse_args(argv)
+    torch.set_num_threads(args.threads)
+    config = TrainDetectorConfig(
+        data_dir=args.data,
+        extra_dirs=tuple(args.extra),
+        out_dir=args.out,
+        init_dir=args.init,
+        epochs=args.epochs,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        crop_px=args.crop,
+        val_fraction=args.val_fraction,
+        seed=args.seed,
+        detector=DetectorConfig(input_size=args.input_size),
+    )
+    try:
+        result = train_detector(config)
+    except (DatasetError, PerceptionError) as exc:
+        print(f"dronectl train-detector: {exc}")
+        return 1
+    print(f"best epoch {result.best_epoch} (val loss {result.best_val_loss:.4f}) in {result.seconds:.0f} s")
+    print(f"weights: {args.out / 'model.safetensors'}")
+    if result.test is not None:
+        print("test:", result.test.summary())
+        print(json.dumps(result.test.as_dict(), indent=2))
+    return 0
