@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission, parse_mission
+from controller.missions.schema import SIMULATED_VEHICLES, Mission, parse_mission
 from controller.planning.planners import PLANNER_NAMES
 from controller.training.instructions import builtin_templates
 from controller.training.phrasing import TargetName, describe
@@ -78,9 +78,9 @@ class BenchmarkConfig:
     def __post_init__(self) -> None:
         if self.n < 1 or self.parallel < 1:
             raise ValueError("n and parallel must be >= 1")
-        if self.base.vehicle not in (SIM, SIM_MAVLINK, PX4_SITL):
+        if self.base.vehicle not in SIMULATED_VEHICLES:
             raise ValueError(
-                f"vehicle must be {SIM!r}, {SIM_MAVLINK!r} or {PX4_SITL!r}, got {self.base.vehicle!r}"
+                f"vehicle must be one of {', '.join(SIMULATED_VEHICLES)}, got {self.base.vehicle!r}"
             )
         unknown = set(self.planners) - set(PLANNER_NAMES)
         if unknown or not self.planners:

@@ -179,17 +179,19 @@ def summarise(config: BenchmarkConfig, results: list[MissionResult], wall_s: flo
         "missions": [r.to_json() for r in results],
     }
     summary["limits"] = limits_summary(results)
-    ready = [
-        r.vehicle_clock_s["ready_s"] - r.info["px4_clock_offset_s"]
-        for r in results
-        if "ready_s" in r.vehicle_clock_s and "px4_clock_offset_s" in r.info
-    ]
-    if ready:  # PX4 SITL: simulated seconds from the bridge's start to the estimator seen ready by MAVSDK
-        summary["px4_ready_sim_s"] = {
-            "mean": round(statistics.fmean(ready), 2),
-            "max": round(max(ready), 2),
-            "n": len(ready),
-        }
+    for autopilot in ("px4", "ardupilot"):
+        offset = f"{autopilot}_clock_offset_s"
+        ready = [
+            r.vehicle_clock_s["ready_s"] - r.info[offset]
+            for r in results
+            if "ready_s" in r.vehicle_clock_s and offset in r.info
+        ]
+        if ready:  # SITL: simulated seconds from the bridge's start to the estimator seen ready by the client
+            summary[f"{autopilot}_ready_sim_s"] = {
+                "mean": round(statistics.fmean(ready), 2),
+                "max": round(max(ready), 2),
+                "n": len(ready),
+            }
     return summary
 
 
@@ -258,12 +260,15 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"instructions from the {corpus} phrases; "
             f"{100 * cfg.get('absent', 0.0):.0f}% name an absent target"
         )
-    if "px4_ready_sim_s" in summary:
-        r = summary["px4_ready_sim_s"]
-        lines.append(
-            f"PX4 estimator ready (as seen by MAVSDK) {r['mean']:.1f} s simulated on average, "
-            f"{r['max']:.1f} s at most ({r['n']} missions)"
-        )
+    for key, who in (
+        ("px4_ready_sim_s", "PX4 estimator ready (as seen by MAVSDK)"),
+        ("ardupilot_ready_sim_s", "ArduPilot's EKF ready (as seen by the GUIDED backend)"),
+    ):
+        if key in summary:
+            r = summary[key]
+            lines.append(
+                f"{who} {r['mean']:.1f} s simulated on average, {r['max']:.1f} s at most ({r['n']} missions)"
+            )
     if base.faults.any:
         lines.append(f"injected faults: {base.faults.model_dump(mode='json', exclude_unset=True)}")
     limits = summary.get("limits")

@@ -17,7 +17,8 @@ target_attribute: null           # the named target's trim colour: black | grey 
 start: {right_m: -0.5, up_m: -0.4, distance_m: 2.0, yaw_deg: 0}   # drone pose relative to the centred pose
 # start: {random: {seed: 7, view_fraction: [0.2, 0.8], distance_m: [1.6, 2.6], yaw_deg: [-8, 8]}}
 instruction: center the gauge     # null: "center the <kind>", "center the <colour> <kind>" with twins
-vehicle: sim                     # sim | sim-mavlink | px4-sitl | a MAVLink URL (udpin://0.0.0.0:14540, serial:///dev/ttyACM0:57600)
+vehicle: sim                     # sim | sim-mavlink | px4-sitl | ardupilot-sitl | a MAVLink URL (udpin://...)
+autopilot: auto                  # a URL's autopilot: auto (its HEARTBEAT) | px4 (MAVSDK) | ardupilot
 camera: sim                      # sim | a stream URL (http://host:8080/stream.mjpg, rtsp://...)
 planner: latent                  # latent | classic | random | oracle
 checkpoint: null                 # null: the shipped one
@@ -31,6 +32,7 @@ loop: {max_move_m: 1.0}          # the loop's settings (move scheme, refinement 
 expect: {outcome: centred, max_steps: 12, final_offset_px: 10}
 sim_speed: 1.0                   # vehicle: sim-mavlink only: simulated s per wall s, or max
 px4: {instance: auto, speed: 1.0}  # vehicle: px4-sitl only (the PX4 folder: --px4 or $PX4_SITL_DIR)
+ardupilot: {instance: auto, speed: 1.0}  # vehicle: ardupilot-sitl only (--ardupilot, $ARDUPILOT_SITL_DIR)
 ```
 
 `start` is the drone's pose relative to the pose that centres the target (in front
@@ -56,7 +58,7 @@ from pydantic import (
     model_validator,
 )
 
-from controller.missions.schema_specs import FaultSpec, PortSpec, Px4Spec
+from controller.missions.schema_specs import ArduPilotSpec, AutopilotName, FaultSpec, PortSpec, Px4Spec
 from controller.planning.grounding import parse_instruction
 from controller.planning.loop_records import LoopSettings, Outcome
 from controller.planning.planners import PLANNERS, PlannerName
@@ -77,7 +79,9 @@ DetectorName = Literal["image", "truth"]
 SIM = "sim"
 SIM_MAVLINK = "sim-mavlink"
 PX4_SITL = "px4-sitl"
-SIMULATED_VEHICLES = (SIM, SIM_MAVLINK, PX4_SITL)
+ARDUPILOT_SITL = "ardupilot-sitl"
+SIMULATED_VEHICLES = (SIM, SIM_MAVLINK, ARDUPILOT_SITL, PX4_SITL)
+_SIMULATED = ", ".join(map(repr, SIMULATED_VEHICLES))
 _MAVLINK_SCHEMES = ("udp://", "udpin://", "udpout://", "tcp://", "tcpin://", "tcpout://", "serial://")
 _STREAM_SCHEMES = ("http://", "https://", "rtsp://", "file://")
 
@@ -229,6 +233,8 @@ class Mission(StrictModel):
     """sim-mavlink: the sim-vehicle's speed (`sim_world.vehicle.config.parse_sim_speed`); the controller
     then times its moves on the vehicle's clock."""
     px4: Px4Spec = Px4Spec()
+    ardupilot: ArduPilotSpec = ArduPilotSpec()
+    autopilot: AutopilotName = "auto"
     faults: FaultSpec = FaultSpec()
 
     @field_validator("sim_speed", mode="before")
@@ -298,7 +304,7 @@ class Mission(StrictModel):
             )
         if self.vehicle not in SIMULATED_VEHICLES and not self.vehicle.startswith(_MAVLINK_SCHEMES):
             raise ValueError(
-                f"vehicle: {self.vehicle!r} is neither 'sim', 'sim-mavlink', 'px4-sitl' nor a MAVLink URL "
+                f"vehicle: {self.vehicle!r} is neither {_SIMULATED} nor a MAVLink URL "
                 f"({', '.join(s + '...' for s in _MAVLINK_SCHEMES)})"
             )
         if self.is_real:
@@ -320,27 +326,30 @@ class Mission(StrictModel):
             )
         if self.sim_speed != 1.0 and self.vehicle != SIM_MAVLINK:
             raise ValueError(
-                f"sim_speed: goes with vehicle sim-mavlink, not {self.vehicle!r} (px4-sitl: px4.speed)"
+                f"sim_speed: goes with vehicle sim-mavlink, not {self.vehicle!r} (SITL: px4/ardupilot.speed)"
             )
         if self.is_real and self.detector == "truth":
             raise ValueError("detector: 'truth' needs the simulator; a real vehicle uses the image detector")
         if self.vehicle != SIM and self.detector == "truth":
             raise ValueError("detector: 'truth' is available in the in-process sim only (vehicle: sim)")
-        if self.vehicle not in (SIM, PX4_SITL) and self.wind is not None:
-            raise ValueError("wind: only the simulated worlds of 'sim' and 'px4-sitl' simulate wind")
-        mavlink_sim = self.vehicle in (SIM_MAVLINK, PX4_SITL)
+        if self.vehicle not in (SIM, PX4_SITL, ARDUPILOT_SITL) and self.wind is not None:
+            raise ValueError("wind: only the worlds of 'sim', 'px4-sitl' and 'ardupilot-sitl' simulate wind")
+        mavlink_sim = self.vehicle in (SIM_MAVLINK, PX4_SITL, ARDUPILOT_SITL)
         if self.faults.link is not None and not (mavlink_sim or self.vehicle.startswith("udpin://")):
             raise ValueError(
-                "faults.link: needs a relayed MAVLink link: sim-mavlink, px4-sitl or a udpin:// URL"
+                "faults.link: needs a relayed MAVLink link: sim-mavlink, a SITL vehicle or a udpin:// URL"
             )
         if (self.faults.camera is not None or self.faults.vehicle_dies_at_s is not None) and not mavlink_sim:
             raise ValueError(
-                "faults: camera faults and a dying vehicle are simulated by sim-mavlink and px4-sitl only"
+                "faults: camera faults and a dying vehicle: ardupilot-sitl, sim-mavlink and px4-sitl only"
             )
         if self.faults.gust_m_s and self.is_real:
             raise ValueError("faults.gust_m_s: only a simulated world has wind to make gusty")
-        if self.vehicle != PX4_SITL and "px4" in self.model_fields_set:
-            raise ValueError(f"px4: only a 'px4-sitl' mission runs PX4 SITL (vehicle is {self.vehicle!r})")
+        for key, sitl in (("px4", PX4_SITL), ("ardupilot", ARDUPILOT_SITL)):
+            if self.vehicle != sitl and key in self.model_fields_set:
+                raise ValueError(f"{key}: only a '{sitl}' mission runs it (vehicle is {self.vehicle!r})")
+        if not self.is_real and self.autopilot != "auto":
+            raise ValueError(f"autopilot: goes with a MAVLink URL; {self.vehicle!r} knows its own autopilot")
         if self.is_real and PLANNERS[self.planner].needs_truth:
             raise ValueError(
                 f"planner: {self.planner!r} needs simulator truth, which a real vehicle does not have"

@@ -26,6 +26,8 @@ from controller.planning.planners import PLANNER_NAMES
 from drone_inspect_core.files import OutputDirError
 from drone_inspect_core.parallel import RayUnavailableError, add_ray_option
 from drone_inspect_core.sim_speed import parse_sim_speed
+from dronectl.ardupilot_options import add_ardupilot_options, resolve_ardupilot_dir
+from sim_world.ardupilot_bridge.ardupilot_process import ArduPilotFolderError
 from sim_world.px4_bridge.px4_process import Px4FolderError, find_px4_dir
 
 
@@ -88,6 +90,10 @@ def base_mission(args: argparse.Namespace) -> Mission:
         px4 = {"speed": _speed("--px4-speed", args.px4_speed or "max"), "keep_ulog": False}
         folder = args.px4 or data.get("px4", {}).get("dir")
         data["px4"] = {**data.get("px4", {}), **px4, "dir": str(find_px4_dir(folder))}
+    if vehicle == "ardupilot-sitl":
+        ardupilot = {"speed": _speed("--ardupilot-speed", args.ardupilot_speed or "max"), "keep_logs": False}
+        folder = args.ardupilot or data.get("ardupilot", {}).get("dir")
+        data["ardupilot"] = {**data.get("ardupilot", {}), **ardupilot, "dir": resolve_ardupilot_dir(folder)}
     return parse_mission(data, source)
 
 
@@ -116,11 +122,13 @@ def main(argv: list[str]) -> int:
     )
     parser.add_argument(
         "--vehicle",
-        choices=("sim", "sim-mavlink", "px4-sitl"),
-        help="in-process (default), the sim-vehicle over MAVLink, or real PX4 SITL flying the world",
+        choices=("sim", "sim-mavlink", "px4-sitl", "ardupilot-sitl"),
+        help="in-process (default), the sim-vehicle over MAVLink, or real PX4 / ArduPilot SITL flying "
+        "the world",
     )
     parser.add_argument("--px4", help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
     parser.add_argument("--px4-speed", help="px4-sitl: simulation speed, a factor or 'max' (default: max)")
+    add_ardupilot_options(parser, speed_default="max")
     parser.add_argument(
         "--sim-speed",
         help="sim-mavlink: the sim-vehicle's speed, a factor (1 = real time, the default) or 'max'",
@@ -162,7 +170,7 @@ def main(argv: list[str]) -> int:
         help="fraction of missions whose instruction names a target not in the scene "
         "(they must end target_not_found)",
     )
-    faults = parser.add_argument_group("injected faults (sim-mavlink and px4-sitl; gusts also sim)")
+    faults = parser.add_argument_group("injected faults (sim-mavlink and the SITL vehicles; gusts also sim)")
     faults.add_argument(
         "--link-loss", type=float, default=0.0, help="fraction of MAVLink datagrams lost, each way"
     )
@@ -215,7 +223,7 @@ def main(argv: list[str]) -> int:
             parallel=args.parallel, rerun=args.rerun, ray=args.ray, instructions=args.instructions,
             absent=args.absent,
         )  # fmt: skip
-    except Px4FolderError as exc:
+    except (Px4FolderError, ArduPilotFolderError) as exc:
         print(f"dronectl benchmark-missions: {exc}", file=sys.stderr)
         return 2
     except ValueError as exc:

@@ -1,4 +1,7 @@
-"""The kit of a real vehicle: MAVSDK on the mission's URL and the stream camera on its camera URL; no truth.
+"""The kit of a real vehicle: its MAVLink URL and the stream camera on its camera URL; no truth.
+
+The backend follows the vehicle's autopilot (`mission.autopilot`; "auto": its HEARTBEAT says):
+MAVSDK for PX4, the GUIDED-mode backend for ArduPilot (`flight.autopilots.MavlinkVehicle`).
 
 For a `udpin://` URL the .tlog relay takes the URL's port and MAVSDK listens behind it
 (`REAL_CLIENT_PORT_SHIFT` higher); other links are flown without a .tlog. Nothing here
@@ -21,7 +24,7 @@ from controller.missions.kits.base import (
     planner_for,
 )
 from controller.missions.schema import Mission
-from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+from flight.autopilots import MavlinkVehicle
 from flight.relay import MavlinkRelay
 from flight.urls import udpin_address
 from perception.stream_camera import StreamCamera
@@ -53,7 +56,7 @@ def open_real_kit(mission: Mission, out_dir: Path, models: LoadedModels | None =
             url = f"udpin://127.0.0.1:{port + REAL_CLIENT_PORT_SHIFT}"
         else:
             log.warning("%s is not a udpin:// link: flying without a .tlog", url)
-        vehicle = stack.enter_context(MavsdkVehicle(MavsdkConfig(url=url, shown_url=mission.vehicle)))
+        vehicle = stack.enter_context(MavlinkVehicle(url, mission.autopilot, shown_url=mission.vehicle))
         camera = stack.enter_context(StreamCamera(mission.camera, timeout_s=3.0, open_timeout_s=10.0))
         planner = planner_for(mission, models, None)
         frame = camera.read()
@@ -63,7 +66,12 @@ def open_real_kit(mission: Mission, out_dir: Path, models: LoadedModels | None =
             detector=image_detector_for(mission, models),
             planner=planner,
             instruction=mission.instruction_text(mission.target_kind, mission.target_attribute),
-            info={"backend": "MAVSDK + stream camera", "vehicle": mission.vehicle, "camera": mission.camera},
+            info={
+                "backend": "MAVLink (MAVSDK for PX4, GUIDED for ArduPilot) + stream camera",
+                "autopilot": mission.autopilot,
+                "vehicle": mission.vehicle,
+                "camera": mission.camera,
+            },
             tlog=tlog,
             image_width_px=frame.width,
         )

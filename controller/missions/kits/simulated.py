@@ -1,4 +1,4 @@
-"""What the kits of simulated MAVLink vehicles (sim-vehicle, PX4 SITL) share.
+"""What the kits of simulated MAVLink vehicles (sim-vehicle, PX4 SITL, ArduPilot SITL) share.
 
 Both start the drone landed below the mission's start pose and take off to its height,
 give the vehicle a random MAVLink system id that MAVSDK insists on (so a run never flies
@@ -24,7 +24,7 @@ from controller.missions.kits.base import (
 from controller.missions.schema import Mission, StartOffset
 from controller.missions.setup import scene_config_for, wind_config_for
 from drone_inspect_core.vocabulary import colour_name
-from flight.mavsdk_backend import MavsdkVehicle
+from flight.vehicle import Vehicle
 from perception.stream_camera import StreamCamera
 from sim_world.rendering.camera import CameraConfig
 from sim_world.rendering.video import VideoFaults
@@ -112,7 +112,7 @@ def new_system_id() -> int:
 def simulated_mavlink_kit(
     mission: Mission,
     models: LoadedModels | None,
-    vehicle: MavsdkVehicle,
+    vehicle: Vehicle,
     camera: StreamCamera,
     truth: SimTruth,
     scene: SceneConfig,
