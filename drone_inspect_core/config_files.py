@@ -8,12 +8,13 @@ inside pydantic or PyYAML. Each kind of file has its own subclass of
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Collection
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
 import yaml
-from pydantic import AfterValidator, BaseModel, ConfigDict, ValidationError
+from pydantic import AfterValidator, BaseModel, ConfigDict, TypeAdapter, ValidationError
 
 
 class StrictModel(BaseModel):
@@ -120,3 +121,22 @@ def read_yaml(path: str | Path, error: type[ConfigFileError]) -> object:
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
         problem = getattr(exc, "problem", None) or "invalid YAML"
         raise error(path, None, f"YAML syntax error{where}: {problem}") from None
+
+
+@functools.cache
+def _adapter(kind: type) -> TypeAdapter[Any]:
+    return TypeAdapter(kind)
+
+
+def to_json(value: Any) -> Any:
+    """A config object (a dataclass or a pydantic model, nested as deep as it is) as JSON-able data:
+    the one codec of the configs that travel between processes (no hand-written to/from pairs)."""
+    return _adapter(type(value)).dump_python(value, mode="json")
+
+
+T = TypeVar("T")
+
+
+def from_json(kind: type[T], data: Any) -> T:
+    """The inverse of `to_json`, validated by the type itself (its fields, `__post_init__`, validators)."""
+    return _adapter(kind).validate_python(data)

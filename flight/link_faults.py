@@ -18,33 +18,26 @@ from __future__ import annotations
 
 import heapq
 import itertools
-import math
 import random
 import threading
 from dataclasses import dataclass
 from typing import Any
 
+from pydantic import Field
 
-@dataclass(frozen=True)
-class LinkFaults:
-    """What a bad link does to each datagram (fractions in [0, 1), times in ms)."""
+from drone_inspect_core.config_files import StrictModel
 
-    loss: float = 0.0
-    latency_ms: float = 0.0
-    jitter_ms: float = 0.0
-    duplicate: float = 0.0
-    reorder: float = 0.0
-    seed: int = 0
 
-    def __post_init__(self) -> None:
-        for name in ("loss", "duplicate", "reorder"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and 0.0 <= value < 1.0):
-                raise ValueError(f"LinkFaults.{name} must be in [0, 1), got {value}")
-        for name in ("latency_ms", "jitter_ms"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and 0.0 <= value <= 10_000.0):
-                raise ValueError(f"LinkFaults.{name} must be in [0, 10000] ms, got {value}")
+class LinkFaults(StrictModel):
+    """What a bad link does to each datagram (fractions in [0, 1), times in ms): the mission file's
+    `faults.link` section and the relay's setting, one type."""
+
+    loss: float = Field(default=0.0, ge=0.0, lt=1.0)
+    latency_ms: float = Field(default=0.0, ge=0.0, le=10_000.0)
+    jitter_ms: float = Field(default=0.0, ge=0.0, le=10_000.0)
+    duplicate: float = Field(default=0.0, ge=0.0, lt=1.0)
+    reorder: float = Field(default=0.0, ge=0.0, lt=1.0)
+    seed: int = Field(default=0, ge=0)
 
     @property
     def active(self) -> bool:

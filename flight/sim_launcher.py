@@ -32,6 +32,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+from drone_inspect_core.config_files import to_json
+
 log = logging.getLogger(__name__)
 
 _TAIL_LINES = 200
@@ -47,13 +49,15 @@ class SimulatorProcess:
     def __init__(
         self,
         module: str,
-        config: dict[str, Any],
+        config: Any,
         log_path: Path,
         ready_prefix: str,
         start_timeout_s: float = 90.0,
         name: str = "simulator",
     ) -> None:
-        self.module, self.config, self.log_path = module, config, Path(log_path)
+        self.module, self.log_path = module, Path(log_path)
+        self.config: dict[str, Any] = to_json(config)
+        """The child's config as JSON (`drone_inspect_core.config_files.to_json` of a config object)."""
         self.ready_prefix, self.start_timeout_s, self.name = ready_prefix, start_timeout_s, name
         self.config_path = self.log_path.with_suffix(".json")
         self.ready: dict[str, Any] = {}

@@ -22,9 +22,10 @@ from types import TracebackType
 import numpy as np
 import pybullet as p
 
+from drone_inspect_core.world_options import WindConfig
 from sim_world.physics.autopilot import Autopilot, AutopilotParams
 from sim_world.physics.quadrotor import GRAVITY_M_S2, Quadrotor, QuadrotorParams, RigidBodyState
-from sim_world.physics.wind import Wind, WindConfig
+from sim_world.physics.wind import Wind
 from sim_world.rendering.camera import CameraConfig, ForwardCamera, Render
 from sim_world.scene.builder import Scene, SceneTarget
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfig

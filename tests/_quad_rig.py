@@ -13,9 +13,10 @@ from types import TracebackType
 
 import pybullet as p
 
+from drone_inspect_core.world_options import WindConfig
 from sim_world.physics.autopilot import Autopilot, AutopilotMode, AutopilotParams
 from sim_world.physics.quadrotor import GRAVITY_M_S2, Quadrotor, QuadrotorParams, RigidBodyState
-from sim_world.physics.wind import Wind, WindConfig
+from sim_world.physics.wind import Wind
 
 PHYSICS_HZ = 240.0
 

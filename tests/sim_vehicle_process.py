@@ -25,7 +25,7 @@ from flight.errors import VehicleConnectionError
 from flight.sim_launcher import SimulatorProcess, SimulatorStartError
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.config import SimVehicleConfig
-from sim_world.vehicle.serve import READY_PREFIX, SimVehicleRun, run_to_json
+from sim_world.vehicle.serve import READY_PREFIX, SimVehicleRun
 
 
 @dataclass(frozen=True)
@@ -68,7 +68,7 @@ class SimVehicleProcess:
         self.started_s = time.perf_counter()
         self._process = SimulatorProcess(
             "sim_world.vehicle",
-            run_to_json(options.run()),
+            options.run(),
             self.log_path,
             READY_PREFIX,
             start_timeout_s=start_timeout_s,

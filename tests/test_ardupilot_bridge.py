@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from drone_inspect_core.world_options import WindConfig
 from sim_world.ardupilot_bridge.ardupilot_process import (
     ArduPilotFolderError,
     ArduPilotOptions,
@@ -26,7 +27,6 @@ from sim_world.ardupilot_bridge.ardupilot_process import (
 from sim_world.ardupilot_bridge.bridge import ArduPilotBridge, ArduPilotRestartedError, JsonTiming
 from sim_world.ardupilot_bridge.link import ArduPilotSilentError, JsonPhysicsServer, PhysicsLinkError
 from sim_world.ardupilot_bridge.protocol import ServoPacket
-from sim_world.physics.wind import WindConfig
 from sim_world.scene.config import DEFAULT_SCENE
 from sim_world.sitl.imu import ImuModel, SensorNoise
 from sim_world.sitl.rig import CameraClock, build_sitl_world

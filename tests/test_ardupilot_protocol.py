@@ -14,9 +14,9 @@ import re
 import numpy as np
 import pytest
 
+from drone_inspect_core.world_options import WindConfig
 from sim_world.ardupilot_bridge.motors import PwmToRotor
 from sim_world.ardupilot_bridge.protocol import MAGIC_16, MAGIC_32, ServoPacket, ServoPacketError, state_json
-from sim_world.physics.wind import WindConfig
 from sim_world.scene.config import DEFAULT_SCENE
 from sim_world.sitl.rig import SITL_QUAD, TruthReader, build_sitl_world, quaternion_wxyz
 

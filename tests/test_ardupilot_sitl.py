@@ -35,7 +35,7 @@ from flight.types import VelocityBody
 from sim_world.ardupilot_bridge.ardupilot_process import ardupilot_instance
 from sim_world.ardupilot_bridge.bridge import JsonTiming
 from sim_world.ardupilot_bridge.run import ArduPilotSimConfig
-from sim_world.ardupilot_bridge.serve import READY_PREFIX, config_to_json
+from sim_world.ardupilot_bridge.serve import READY_PREFIX
 
 pytestmark = [requires_ardupilot, pytest.mark.slow]
 
@@ -61,7 +61,7 @@ def test_ardupilot_flies_the_world_ready_arm_hover_and_a_half_metre_move(tmp_pat
             system_id=system_id,
         )
         with SimulatorProcess(
-            "sim_world.ardupilot_bridge", config_to_json(config), tmp_path / "sim.log", READY_PREFIX
+            "sim_world.ardupilot_bridge", config, tmp_path / "sim.log", READY_PREFIX
         ) as sim:
             truth = sim.ready["truth_url"]
             url = config.mavlink_url

@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 from _quad_rig import QuadRig
 
+from drone_inspect_core.world_options import WindConfig
 from sim_world.physics.autopilot import Autopilot, AutopilotError, AutopilotMode, AutopilotParams
 from sim_world.physics.autopilot_control import Mixer
 from sim_world.physics.quadrotor import GRAVITY_M_S2, ROTOR_YAW_SIGN, QuadrotorParams
-from sim_world.physics.wind import Wind, WindConfig
+from sim_world.physics.wind import Wind
 
 
 def _thrust_n(speeds: np.ndarray, prm: QuadrotorParams) -> float:

@@ -15,10 +15,11 @@ import pytest
 from pymavlink.dialects.v20 import common as M
 
 from controller.missions.schema import MissionFileError, parse_mission
+from drone_inspect_core.world_options import CameraFaults
 from flight.link_faults import FaultyDelivery, LinkFaults
 from flight.relay import MavlinkRelay
 from sim_world.rendering.camera import CameraConfig
-from sim_world.rendering.video import VideoConfig, VideoFaults, WorldVideoFeed
+from sim_world.rendering.video import VideoConfig, WorldVideoFeed
 from sim_world.world import World, WorldConfig
 
 
@@ -112,7 +113,7 @@ def _capture_at(world: World, feed: WorldVideoFeed, sim_s: float, east_m: float)
 
 
 def test_the_camera_freezes_then_dies_at_its_simulated_times(feed_world: World) -> None:
-    faults = VideoFaults(freeze_at_s=1.0, freeze_for_s=1.0, dies_at_s=3.0)
+    faults = CameraFaults(freeze_at_s=1.0, freeze_for_s=1.0, dies_at_s=3.0)
     feed = WorldVideoFeed(
         feed_world, feed_world.state().position_enu_m, VideoConfig(port=0, clock="sim", faults=faults)
     )
@@ -135,7 +136,7 @@ def test_the_camera_freezes_then_dies_at_its_simulated_times(feed_world: World) 
 
 
 def test_dropped_frames_are_never_sent(feed_world: World) -> None:
-    config = VideoConfig(port=0, clock="sim", faults=VideoFaults(drop=0.5, seed=2))
+    config = VideoConfig(port=0, clock="sim", faults=CameraFaults(drop=0.5, seed=2))
     feed = WorldVideoFeed(feed_world, feed_world.state().position_enu_m, config)
     feed.start()
     try:

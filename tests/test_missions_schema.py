@@ -8,9 +8,10 @@ from pathlib import Path
 import pytest
 
 from controller.missions.results import judge
-from controller.missions.schema import MissionFileError, RandomStart, StartOffset, load_mission, parse_mission
+from controller.missions.schema import MissionFileError, RandomStart, load_mission, parse_mission
 from controller.missions.suite import load_suite
 from controller.planning.loop_records import Outcome
+from drone_inspect_core.world_options import StartPose
 
 MISSIONS_DIR = Path(__file__).resolve().parents[1] / "missions" / "regression"
 
@@ -80,7 +81,7 @@ def test_random_start_is_seeded_and_keeps_the_target_in_view() -> None:
     assert first == again and first != other
     for seed in range(200):
         start = RandomStart(seed=seed, view_fraction=(0.2, 0.8), yaw_deg=(-10, 10)).draw(60.0, 45.0)
-        assert isinstance(start, StartOffset)
+        assert isinstance(start, StartPose)
         # Back from the pose to the image: the bearing of the target from the optical axis, then its height.
         bearing = math.atan2(-start.right_m, start.distance_m) - math.radians(start.yaw_deg)
         depth = math.hypot(start.right_m, start.distance_m) * math.cos(bearing)

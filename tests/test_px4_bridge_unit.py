@@ -3,6 +3,7 @@ the PX4 folder checks and the run's PX4 parameters."""
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import stat
@@ -12,7 +13,8 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from sim_world.physics.wind import WindConfig
+from drone_inspect_core.config_files import from_json, to_json
+from drone_inspect_core.world_options import StartPose, WindConfig
 from sim_world.px4_bridge.geodesy import HomePoint, magnetic_field_ned_gauss, pressure_hpa, temperature_c
 from sim_world.px4_bridge.messages import (
     ACCEL_BITS,
@@ -32,9 +34,8 @@ from sim_world.px4_bridge.px4_process import (
     find_px4_dir,
     speed_scaled_timeouts,
 )
-from sim_world.px4_bridge.run import Px4SimConfig, config_from_json, config_to_json
+from sim_world.px4_bridge.run import Px4SimConfig
 from sim_world.px4_bridge.sensors import SensorNoise, SensorSuite, Truth
-from sim_world.vehicle.serve import StartPose
 
 ZURICH = HomePoint()
 
@@ -227,12 +228,12 @@ def test_simulator_config_survives_json(tmp_path: Path) -> None:
         px4_dir=tmp_path,
         instance=2,
         seed=5,
-        start_offset=StartPose(0.1, -0.2, 2.0, 3.0),
+        start_offset=StartPose(right_m=0.1, up_m=-0.2, distance_m=2.0, yaw_deg=3.0),
         system_id=99,
         params={"COM_DISARM_LAND": 1.0},
         wind=WindConfig(mean_enu_m_s=(0.5, 0.0, 0.0), gust_std_m_s=0.3),
         duration_s=12.0,
     )
-    assert config_from_json(config_to_json(config)) == config
+    assert from_json(Px4SimConfig, json.loads(json.dumps(to_json(config)))) == config
     with pytest.raises(ValueError, match="instance"):
         Px4SimConfig(px4_dir=tmp_path, instance=12)

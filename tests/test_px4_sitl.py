@@ -32,7 +32,7 @@ from flight.sim_launcher import SimulatorProcess
 from flight.types import VelocityBody
 from sim_world.px4_bridge.bridge import PX4_CLOCK_OFFSET_US, BridgeTiming
 from sim_world.px4_bridge.px4_process import px4_instance
-from sim_world.px4_bridge.run import READY_PREFIX, Px4SimConfig, config_to_json
+from sim_world.px4_bridge.run import READY_PREFIX, Px4SimConfig
 
 pytestmark = [requires_px4, pytest.mark.slow]
 
@@ -57,9 +57,7 @@ def test_px4_flies_the_world_ready_hover_and_a_half_metre_move(tmp_path: Path) -
             timing=BridgeTiming(speed=None),
             system_id=system_id,
         )
-        with SimulatorProcess(
-            "sim_world.px4_bridge", config_to_json(config), tmp_path / "sim.log", READY_PREFIX
-        ) as sim:
+        with SimulatorProcess("sim_world.px4_bridge", config, tmp_path / "sim.log", READY_PREFIX) as sim:
             truth = sim.ready["truth_url"]
             url = f"udpin://127.0.0.1:{14540 + instance}"
             with MavsdkVehicle(

@@ -20,12 +20,13 @@ from test_sim_vehicle_udp import sim, take_off, wait_mode
 
 from controller.benchmarks.mission_plan import BenchmarkConfig, benchmark_missions
 from controller.missions.schema import MissionFileError, parse_mission
+from drone_inspect_core.config_files import from_json, to_json
 from drone_inspect_core.sim_speed import parse_sim_speed
 from sim_world.vehicle import px4_modes as modes
 from sim_world.vehicle.commander import Commander, CommanderConfig, FailsafeStage
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.params import ParameterStore
-from sim_world.vehicle.serve import SimVehicleRun, run_from_json, run_to_json
+from sim_world.vehicle.serve import SimVehicleRun
 from sim_world.vehicle.setpoints import SetpointFrame, VelocitySetpoint
 
 REPO = Path(__file__).resolve().parents[1]
@@ -42,7 +43,7 @@ def test_speed_parses_numbers_and_max_and_names_bad_values() -> None:
     assert SimVehicleConfig(speed="max").faster_than_real_time
     assert SimVehicleConfig(speed=4.0).faster_than_real_time and not SimVehicleConfig().faster_than_real_time
     run = SimVehicleRun(vehicle=SimVehicleConfig(speed="max"))
-    assert run_from_json(json.loads(json.dumps(run_to_json(run)))).vehicle.speed == "max"
+    assert from_json(SimVehicleRun, json.loads(json.dumps(to_json(run)))).vehicle.speed == "max"
 
 
 def test_mission_sim_speed_goes_with_sim_mavlink_and_reaches_the_benchmark_missions() -> None:

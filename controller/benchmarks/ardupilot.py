@@ -35,7 +35,7 @@ from flight.safety import flight_guard
 from flight.sim_launcher import SimulatorProcess
 from sim_world.ardupilot_bridge.bridge import JsonTiming
 from sim_world.ardupilot_bridge.run import ArduPilotSimConfig
-from sim_world.ardupilot_bridge.serve import READY_PREFIX, config_to_json
+from sim_world.ardupilot_bridge.serve import READY_PREFIX
 
 log = logging.getLogger(__name__)
 
@@ -66,7 +66,7 @@ def hover_run(
     t0 = time.perf_counter()
     with SimulatorProcess(
         "sim_world.ardupilot_bridge",
-        config_to_json(config),
+        config,
         workdir / f"ardupilot_sim_{label}.log",
         READY_PREFIX,
     ) as sim:

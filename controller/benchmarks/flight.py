@@ -46,7 +46,7 @@ from flight.types import VelocityBody
 from flight.urls import udpin_address
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.config import SimVehicleConfig
-from sim_world.vehicle.serve import READY_PREFIX, SimVehicleRun, run_to_json
+from sim_world.vehicle.serve import READY_PREFIX, SimVehicleRun
 
 log = logging.getLogger(__name__)
 
@@ -122,7 +122,7 @@ def _sim_vehicle(port: int, boot_delay_s: float, folder: Path) -> SimulatorProce
         commander=CommanderConfig(arming_boot_delay_s=boot_delay_s),
     )
     run = SimVehicleRun(vehicle=vehicle)
-    return SimulatorProcess("sim_world.vehicle", run_to_json(run), folder / "sim_vehicle.log", READY_PREFIX)
+    return SimulatorProcess("sim_world.vehicle", run, folder / "sim_vehicle.log", READY_PREFIX)
 
 
 def _mavsdk_bench(config: FlightBenchConfig) -> dict[str, Any]:

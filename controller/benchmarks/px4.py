@@ -32,7 +32,7 @@ from flight.safe_vehicle import SafeVehicle
 from flight.safety import flight_guard
 from flight.sim_launcher import SimulatorProcess
 from sim_world.px4_bridge.bridge import PX4_CLOCK_OFFSET_US, BridgeTiming
-from sim_world.px4_bridge.run import READY_PREFIX, Px4SimConfig, config_to_json
+from sim_world.px4_bridge.run import READY_PREFIX, Px4SimConfig
 
 log = logging.getLogger(__name__)
 
@@ -61,7 +61,7 @@ def hover_run(
     t0 = time.perf_counter()
     label = ("camera" if camera else "no-camera") + ("-max" if speed is None else f"-x{speed:g}")
     with SimulatorProcess(
-        "sim_world.px4_bridge", config_to_json(config), workdir / f"px4_sim_{label}.log", READY_PREFIX
+        "sim_world.px4_bridge", config, workdir / f"px4_sim_{label}.log", READY_PREFIX
     ) as sim:
         lockstep_wall_s = time.perf_counter() - t0
         url = f"udpin://127.0.0.1:{config.mavlink_url.rsplit(':', 1)[1]}"

@@ -58,7 +58,6 @@ from pydantic import (
     model_validator,
 )
 
-from controller.missions.schema_specs import ArduPilotSpec, AutopilotName, FaultSpec, PortSpec, Px4Spec
 from controller.planning.grounding import parse_instruction
 from controller.planning.loop_records import LoopSettings, Outcome
 from controller.planning.planners import PLANNERS, PlannerName
@@ -71,7 +70,9 @@ from drone_inspect_core.vocabulary import (
     validated_kinds,
     vocabulary_with,
 )
+from drone_inspect_core.world_options import CameraFaults, StartPose, WindConfig
 from flight.errors import ConnectionUrlError
+from flight.link_faults import LinkFaults
 from flight.urls import validate_connection_url
 
 DetectorName = Literal["image", "truth"]
@@ -86,6 +87,102 @@ _MAVLINK_SCHEMES = ("udp://", "udpin://", "udpout://", "tcp://", "tcpin://", "tc
 _STREAM_SCHEMES = ("http://", "https://", "rtsp://", "file://")
 
 
+AutopilotName = Literal["auto", "px4", "ardupilot"]
+"""A MAVLink URL's autopilot (`Mission.autopilot`): "auto" (told by its HEARTBEAT), "px4" (flown with
+MAVSDK) or "ardupilot" (flown in GUIDED mode, `flight.ardupilot_backend`)."""
+
+
+class PortSpec(StrictModel):
+    """Ports for a `sim-mavlink` mission: "auto" (the default) takes free ones per run, so any number of
+    runs fly at once; a number fixes one (UDP p: the sim-vehicle, p+1: the .tlog relay, p+2: MAVSDK),
+    checked free before anything starts (`drone_inspect_core.ports.check_free`)."""
+
+    mavlink_udp: int | Literal["auto"] = "auto"
+    http: int | Literal["auto"] = "auto"
+
+    @field_validator("mavlink_udp", "http")
+    @classmethod
+    def _port_range(cls, value: int | str) -> int | str:
+        if isinstance(value, int) and not 1024 <= value <= 65533:
+            raise ValueError(f"must be a port in 1024..65533 or 'auto', got {value}")
+        return value
+
+
+class SitlSpec(StrictModel):
+    """What a mission flown by a real autopilot's SITL (PX4, ArduPilot) says about running it."""
+
+    dir: str | None = None
+    """The autopilot's SITL folder; None: the command line's option, else its environment variable."""
+    instance: int | Literal["auto"] = "auto"
+    """Instance 0..9 (the autopilot's ports shift with it); "auto": the lowest one nobody holds."""
+    speed: float | Literal["max"] = 1.0
+    """Simulated seconds per wall second, or "max" (lockstep as fast as it goes; benchmarks)."""
+    params: dict[str, float] = Field(default_factory=dict)
+    """Autopilot parameters set at boot (`MPC_XY_VEL_MAX: 1.0`, `WPNAV_SPEED: 300`)."""
+
+    @field_validator("instance")
+    @classmethod
+    def _instance_range(cls, value: int | str) -> int | str:
+        if isinstance(value, int) and not 0 <= value <= 9:
+            raise ValueError(f"must be 0..9 or 'auto', got {value}")
+        return value
+
+    @field_validator("speed")
+    @classmethod
+    def _speed_range(cls, value: float | str) -> float | str:
+        if isinstance(value, float) and not 0.05 <= value <= 100.0:
+            raise ValueError(f"must be in [0.05, 100] or 'max', got {value:g}")
+        return value
+
+
+class Px4Spec(SitlSpec):
+    """How a `px4-sitl` mission runs PX4 SITL (see `sim_world.px4_bridge`; ports 4560+N, 14540+N)."""
+
+    noise: float = Field(default=1.0, gt=0.0, le=10.0)
+    """Scale of every sensor noise and bias (PX4 refuses perfectly constant sensors: > 0)."""
+    keep_ulog: bool = True
+    """Copy PX4's .ulg flight log into the report folder (`px4/`); ~4 MB per 20 s."""
+
+
+class ArduPilotSpec(SitlSpec):
+    """How an `ardupilot-sitl` mission runs ArduCopter SITL (see `sim_world.ardupilot_bridge`; ports
+    9002+10N, 5760+10N). Its folder: `--ardupilot`, else $ARDUPILOT_SITL_DIR, else
+    ../shared/ardupilot-sitl."""
+
+    noise: float = Field(default=1.0, ge=0.0, le=10.0)
+    """Scale of the IMU noise and bias the bridge adds (0: none; ArduPilot simulates GPS, baro, compass)."""
+    keep_logs: bool = True
+    """Copy ArduPilot's .BIN flight logs into the report folder (`ardupilot/`); ~1 MB per simulated min."""
+    hold_mode: Literal["BRAKE", "LOITER"] = "BRAKE"
+    """The mode that holds after takeoff and outside offboard (LOITER follows the pilot's throttle)."""
+
+
+class FaultSpec(StrictModel):
+    """Faults injected on purpose, to see how a mission degrades; all off by default."""
+
+    link: LinkFaults | None = None
+    """A bad MAVLink link between the controller and the vehicle (`flight.link_faults`)."""
+    camera: CameraFaults | None = None
+    """A bad camera at its source (`drone_inspect_core.world_options`); times: simulated s from boot."""
+    gust_m_s: float = Field(default=0.0, ge=0.0, le=10.0)
+    """Gusts (the wind's standard deviation per axis, m/s) in a simulated world."""
+    vehicle_dies_at_s: float | None = Field(default=None, ge=0.0)
+    """The simulated vehicle (sim-vehicle, or PX4 itself) is killed at this simulated time from boot."""
+    seed: int = Field(default=0, ge=0)
+
+    def link_faults(self) -> LinkFaults | None:
+        """The link faults for the relay, seeded with this mission's `seed` (None: a clean link)."""
+        return None if self.link is None else self.link.model_copy(update={"seed": self.seed})
+
+    def camera_faults(self) -> CameraFaults | None:
+        """The camera faults for the video source, seeded with this mission's `seed`."""
+        return None if self.camera is None else self.camera.model_copy(update={"seed": self.seed})
+
+    @property
+    def any(self) -> bool:
+        return bool(self.link or self.camera or self.gust_m_s or self.vehicle_dies_at_s is not None)
+
+
 class MissionFileError(ConfigFileError):
     """A mission file that cannot be flown; the message names the file and the field."""
 
@@ -95,15 +192,6 @@ class SceneSpec(StrictModel):
 
     config: str | dict[str, Any] | None = None
     seed: int = Field(default=0, ge=0)
-
-
-class StartOffset(StrictModel):
-    """A fixed start: the drone's offset from the centred pose, in metres and degrees."""
-
-    right_m: float = Field(default=0.0, ge=-3.0, le=3.0)
-    up_m: float = Field(default=0.0, ge=-2.0, le=2.0)
-    distance_m: float = Field(default=2.0, gt=0.5, le=6.0)
-    yaw_deg: float = Field(default=0.0, ge=-30.0, le=30.0)
 
 
 class RandomStart(StrictModel):
@@ -128,7 +216,7 @@ class RandomStart(StrictModel):
             raise ValueError(f"must stay above 0.5 m, got {list(value)}")
         return value
 
-    def draw(self, hfov_deg: float, vfov_deg: float) -> StartOffset:
+    def draw(self, hfov_deg: float, vfov_deg: float) -> StartPose:
         """The start offset this seed gives, for a level camera with these fields of view.
 
         The target is put at image position (fu, fv) (fractions of the half width and
@@ -147,7 +235,7 @@ class RandomStart(StrictModel):
         depth = distance * math.cos(bearing) / math.cos(bearing + math.radians(yaw))  # along the optical axis
         right_m = -distance * math.tan(bearing + math.radians(yaw))
         up_m = fv * depth * math.tan(math.radians(vfov_deg) / 2.0)
-        return StartOffset(right_m=right_m, up_m=up_m, distance_m=distance, yaw_deg=yaw)
+        return StartPose(right_m=right_m, up_m=up_m, distance_m=distance, yaw_deg=yaw)
 
 
 class RandomStartSpec(StrictModel):
@@ -160,18 +248,10 @@ def _start_form(value: object) -> str:
 
 
 Start = Annotated[
-    Annotated[StartOffset, Tag("fixed-start")] | Annotated[RandomStartSpec, Tag("random-start")],
+    Annotated[StartPose, Tag("fixed-start")] | Annotated[RandomStartSpec, Tag("random-start")],
     Discriminator(_start_form),
 ]
 """Either a fixed offset or `{random: {...}}`; errors are reported for the form that was written."""
-
-
-class WindSpec(StrictModel):
-    """Wind for the simulated world (ENU m/s); ignored, with a warning, for a real vehicle."""
-
-    mean_enu_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    gust_std_m_s: float = Field(default=0.0, ge=0.0, le=5.0)
-    gust_time_constant_s: float = Field(default=2.0, gt=0.0)
 
 
 class Expectations(StrictModel):
@@ -206,7 +286,7 @@ class Mission(StrictModel):
     target_attribute: str | None = None
     """The named target's trim colour (a colour name of `drone_inspect_core.vocabulary`);
     None: drawn."""
-    start: Start = StartOffset()
+    start: Start = StartPose()
     instruction: str | None = None
     """None: resolved from the built scene, "center the <kind>" ("center the <colour> <kind>" when the
     colour tells the named target apart: twins, or a `target_attribute`)."""
@@ -224,7 +304,7 @@ class Mission(StrictModel):
     max_steps: int = Field(default=20, ge=1, le=500)
     timeout_s: float = Field(default=120.0, gt=0.0)
     takeoff_altitude_m: float = Field(default=1.5, gt=0.3, le=4.0)
-    wind: WindSpec | None = None
+    wind: WindConfig | None = None
     loop: LoopSettings = LoopSettings()
     """How the centring loop moves and waits (`controller.planning.loop_records.LoopSettings`)."""
     expect: Expectations = Expectations()

@@ -6,10 +6,8 @@ Shared by the kits of the simulated vehicles; a real-vehicle mission never impor
 
 from __future__ import annotations
 
-from dataclasses import replace
-
-from controller.missions.schema import Mission, RandomStartSpec, StartOffset
-from sim_world.physics.wind import WindConfig
+from controller.missions.schema import Mission, RandomStartSpec
+from drone_inspect_core.world_options import StartPose, WindConfig
 from sim_world.scene.config import (
     DEFAULT_SCENE,
     SceneConfig,
@@ -51,19 +49,13 @@ def scene_config_for(mission: Mission) -> SceneConfig:
 
 def wind_config_for(mission: Mission) -> WindConfig:
     """The mission's wind for a simulated world (calm when it names none); `faults.gust_m_s`: the gusts."""
-    wind = WindConfig()
-    if mission.wind is not None:
-        wind = WindConfig(
-            mean_enu_m_s=mission.wind.mean_enu_m_s,
-            gust_std_m_s=mission.wind.gust_std_m_s,
-            gust_time_constant_s=mission.wind.gust_time_constant_s,
-        )
+    wind = mission.wind or WindConfig()
     if mission.faults.gust_m_s:
-        wind = replace(wind, gust_std_m_s=mission.faults.gust_m_s)
+        wind = wind.model_copy(update={"gust_std_m_s": mission.faults.gust_m_s})
     return wind
 
 
-def start_offset_for(mission: Mission, hfov_deg: float, vfov_deg: float) -> StartOffset:
+def start_offset_for(mission: Mission, hfov_deg: float, vfov_deg: float) -> StartPose:
     """The fixed start, or the seeded random draw for this camera."""
     if isinstance(mission.start, RandomStartSpec):
         return mission.start.random.draw(hfov_deg, vfov_deg)

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drone_inspect_core.world_options import CameraFaults, StartPose, WindConfig
 from sim_world.ardupilot_bridge.ardupilot_process import (
     MAX_INSTANCE,
     ArduPilotOptions,
@@ -28,13 +29,11 @@ from sim_world.ardupilot_bridge.ardupilot_process import (
 )
 from sim_world.ardupilot_bridge.bridge import ArduPilotBridge, JsonBridgeStats, JsonTiming
 from sim_world.ardupilot_bridge.link import JsonPhysicsServer
-from sim_world.physics.wind import WindConfig
 from sim_world.px4_bridge.geodesy import HomePoint
-from sim_world.rendering.video import VideoConfig, VideoFaults, WorldVideoFeed
+from sim_world.rendering.video import VideoConfig, WorldVideoFeed
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfig
 from sim_world.sitl.imu import ImuModel, SensorNoise
 from sim_world.sitl.rig import CameraClock, build_sitl_world
-from sim_world.vehicle.serve import StartPose
 from sim_world.world import derived_seed
 
 log = logging.getLogger(__name__)
@@ -66,7 +65,7 @@ class ArduPilotSimConfig:
     connect_timeout_s: float = 30.0  # ArduPilot start to its first physics frame (here: ~0.5 s)
     duration_s: float | None = None  # of simulated time; None: until stopped
     wind: WindConfig = field(default_factory=WindConfig)
-    video_faults: VideoFaults | None = None
+    video_faults: CameraFaults | None = None
     ardupilot_dies_at_s: float | None = None
     """An injected fault: ArduPilot is killed (SIGKILL) at this simulated time."""
 

@@ -1,4 +1,4 @@
-"""Wind: a constant mean plus seeded, reproducible gusts.
+"""Wind: a constant mean plus seeded, reproducible gusts (`WindConfig`, from the ground floor).
 
 Gusts are a first-order Gauss-Markov (Ornstein-Uhlenbeck) process per ENU axis,
 the usual stand-in for low-altitude turbulence: a stationary standard deviation
@@ -11,38 +11,10 @@ what step it is queried (queries must not go back in time).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
-
-@dataclass(frozen=True)
-class WindConfig:
-    """Mean wind (ENU, m/s) plus gusts; the default is calm air.
-
-    Gusts are isotropic (the same ``gust_std_m_s`` on all three axes), a simple,
-    conservative choice: real low-altitude vertical turbulence is somewhat weaker.
-
-    ``sample_period_s`` is the grid on which the gust process is drawn; it must be
-    well below the gust time constant (PyBullet steps in between see a linear ramp).
-    """
-
-    mean_enu_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    gust_std_m_s: float = 0.0
-    gust_time_constant_s: float = 2.0
-    sample_period_s: float = 0.05
-
-    def __post_init__(self) -> None:
-        if len(self.mean_enu_m_s) != 3 or not all(math.isfinite(v) for v in self.mean_enu_m_s):
-            raise ValueError(f"WindConfig.mean_enu_m_s must be three finite numbers, got {self.mean_enu_m_s}")
-        if not (math.isfinite(self.gust_std_m_s) and self.gust_std_m_s >= 0.0):
-            raise ValueError(f"WindConfig.gust_std_m_s must be >= 0, got {self.gust_std_m_s}")
-        if not self.gust_time_constant_s > 0.0:
-            raise ValueError(f"WindConfig.gust_time_constant_s must be > 0, got {self.gust_time_constant_s}")
-        if not 0.0 < self.sample_period_s <= self.gust_time_constant_s:
-            raise ValueError(
-                f"WindConfig.sample_period_s must be in (0, gust_time_constant_s], got {self.sample_period_s}"
-            )
+from drone_inspect_core.world_options import WindConfig
 
 
 class Wind:

@@ -13,11 +13,11 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TextIO
 
-from sim_world.physics.wind import WindConfig
+from drone_inspect_core.world_options import CameraFaults, StartPose, WindConfig
 from sim_world.process_entry import say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
 from sim_world.px4_bridge.bridge import BridgeStats, BridgeTiming, CameraClock, Px4Bridge
@@ -30,10 +30,9 @@ from sim_world.px4_bridge.link import (
 )
 from sim_world.px4_bridge.px4_process import MAX_INSTANCE, Px4Options, Px4Process, Px4StartError
 from sim_world.px4_bridge.sensors import SensorNoise, SensorSuite
-from sim_world.rendering.video import VideoConfig, VideoError, VideoFaults, WorldVideoFeed
-from sim_world.scene.config import DEFAULT_SCENE, SceneConfig, parse_scene_config
+from sim_world.rendering.video import VideoConfig, VideoError, WorldVideoFeed
+from sim_world.scene.config import DEFAULT_SCENE, SceneConfig
 from sim_world.sitl.rig import SITL_QUAD, build_sitl_world
-from sim_world.vehicle.serve import StartPose
 from sim_world.world import World, derived_seed
 
 log = logging.getLogger(__name__)
@@ -71,7 +70,7 @@ class Px4SimConfig:
     connect_timeout_s: float = 60.0  # PX4 start to lockstep (a cold start here: ~1 s)
     duration_s: float | None = None  # of simulated time; None: until stopped
     wind: WindConfig = field(default_factory=WindConfig)
-    video_faults: VideoFaults | None = None
+    video_faults: CameraFaults | None = None
     px4_dies_at_s: float | None = None
     """An injected fault: PX4 is killed (SIGKILL) at this simulated time."""
 
@@ -221,58 +220,6 @@ def _accept(server: SimulatorServer, px4: Px4Process, timeout_s: float) -> None:
 
 # ----------------------------------------------------------------------------- serving a process
 READY_PREFIX = "px4-sim ready: "
-
-
-def config_to_json(config: Px4SimConfig) -> dict[str, Any]:
-    """The config as JSON, for the simulator's process entry point (`python -m sim_world.px4_bridge`)."""
-    return {
-        "px4_dir": str(config.px4_dir),
-        "instance": config.instance,
-        "scene": config.scene.model_dump(mode="json"),
-        "seed": config.seed,
-        "start_offset": None if config.start_offset is None else asdict(config.start_offset),
-        "image_size_px": config.image_size_px,
-        "camera": config.camera,
-        "video_port": config.video_port,
-        "video_host": config.video_host,
-        "timing": asdict(config.timing),
-        "home": asdict(config.home),
-        "noise": asdict(config.noise),
-        "system_id": config.system_id,
-        "params": dict(config.params),
-        "px4_log_dir": None if config.px4_log_dir is None else str(config.px4_log_dir),
-        "connect_timeout_s": config.connect_timeout_s,
-        "duration_s": config.duration_s,
-        "wind": asdict(config.wind),
-        "video_faults": None if config.video_faults is None else asdict(config.video_faults),
-        "px4_dies_at_s": config.px4_dies_at_s,
-    }
-
-
-def config_from_json(data: dict[str, Any]) -> Px4SimConfig:
-    """The inverse of `config_to_json` (values are validated by the dataclasses and the scene model)."""
-    return Px4SimConfig(
-        px4_dir=Path(data["px4_dir"]),
-        instance=int(data["instance"]),
-        scene=parse_scene_config(data["scene"], "<px4-sim config>"),
-        seed=int(data["seed"]),
-        start_offset=None if data["start_offset"] is None else StartPose(**data["start_offset"]),
-        image_size_px=int(data["image_size_px"]),
-        camera=bool(data["camera"]),
-        video_port=data["video_port"],
-        video_host=data["video_host"],
-        timing=BridgeTiming(**data["timing"]),
-        home=HomePoint(**data["home"]),
-        noise=SensorNoise(**data["noise"]),
-        system_id=data["system_id"],
-        params={str(k): float(v) for k, v in data["params"].items()},
-        px4_log_dir=None if data["px4_log_dir"] is None else Path(data["px4_log_dir"]),
-        connect_timeout_s=float(data["connect_timeout_s"]),
-        duration_s=data["duration_s"],
-        wind=WindConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in data["wind"].items()}),
-        video_faults=None if data.get("video_faults") is None else VideoFaults(**data["video_faults"]),
-        px4_dies_at_s=data.get("px4_dies_at_s"),
-    )
 
 
 def serve(config: Px4SimConfig, out: TextIO, watch_parent: bool = False) -> int:

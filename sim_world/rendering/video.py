@@ -29,6 +29,7 @@ import numpy as np
 import pybullet as p
 
 from drone_inspect_core.frames import enu_to_ned, yaw_enu_to_ned_rad
+from drone_inspect_core.world_options import CameraFaults
 from sim_world.rendering.mjpeg import MjpegServer
 from sim_world.world import World, WorldConfig
 
@@ -42,33 +43,6 @@ STOP_POLL_S = 0.02  # the render process checks its stop flag at least this ofte
 
 class VideoError(RuntimeError):
     """The render process could not start or serve (port in use, scene error, ...)."""
-
-
-@dataclass(frozen=True)
-class VideoFaults:
-    """A bad camera on purpose: dropped frames, a frozen picture, a stream that dies.
-
-    Times are simulated seconds since the vehicle started (a mission's loop typically
-    begins 10-20 s in, after readiness, arming and the takeoff). While frozen, the last
-    image is sent again and again (new frame numbers, the same picture, as a stuck encoder
-    does) while `/truth.json` keeps telling the truth. A dead stream closes the server.
-    """
-
-    drop: float = 0.0  # fraction of rendered frames never sent
-    freeze_at_s: float | None = None
-    freeze_for_s: float = 3.0
-    dies_at_s: float | None = None
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        if not 0.0 <= self.drop < 1.0:
-            raise ValueError(f"VideoFaults.drop must be in [0, 1), got {self.drop}")
-        for name in ("freeze_at_s", "dies_at_s"):
-            value = getattr(self, name)
-            if value is not None and not value >= 0.0:
-                raise ValueError(f"VideoFaults.{name} must be >= 0 s, got {value}")
-        if not self.freeze_for_s > 0.0:
-            raise ValueError(f"VideoFaults.freeze_for_s must be > 0, got {self.freeze_for_s}")
 
 
 class TruthExtremes:
@@ -108,7 +82,7 @@ class VideoConfig:
     clock); "sim": render each `capture()` once, the caller capturing `fps` times per simulated
     second (the PX4 bridge, which may run faster or slower than real time)."""
     max_behind_s: float = 1.0  # "sim" clock: how long capture() waits for the previous frame
-    faults: VideoFaults | None = None
+    faults: CameraFaults | None = None
 
     def __post_init__(self) -> None:
         if self.clock not in ("wall", "sim"):
@@ -253,7 +227,7 @@ def _serve(
             # A vehicle killed outright never sets `stop` (and `daemon=True` only acts on a normal
             # exit): re-parenting means it is gone, so stop rather than render for nobody forever.
             sim_clock = config.clock == "sim"
-            faults = config.faults or VideoFaults()
+            faults = config.faults or CameraFaults()
             rng = random.Random(faults.seed)
             extremes = TruthExtremes()
             frozen: np.ndarray | None = None

@@ -16,12 +16,11 @@ import numpy as np
 import pybullet as p
 
 from drone_inspect_core.frames import enu_to_ned
+from drone_inspect_core.world_options import StartPose, WindConfig
 from sim_world.physics.quadrotor import QuadrotorParams
-from sim_world.physics.wind import WindConfig
 from sim_world.rendering.camera import CameraConfig
 from sim_world.scene.config import SceneConfig
 from sim_world.sitl.imu import Truth
-from sim_world.vehicle.serve import StartPose
 from sim_world.world import World, WorldConfig
 
 SITL_QUAD = QuadrotorParams(landing_gear_stiffness_n_m=3000.0)

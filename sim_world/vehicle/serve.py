@@ -14,16 +14,15 @@ import os
 import signal
 import threading
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, TextIO
 
-from sim_world.physics.wind import WindConfig
+from drone_inspect_core.world_options import CameraFaults, StartPose, WindConfig
 from sim_world.process_entry import say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
 from sim_world.rendering.camera import CameraConfig
-from sim_world.rendering.video import VideoConfig, VideoError, VideoFaults, WorldVideoFeed
-from sim_world.scene.config import DEFAULT_SCENE, SceneConfig, parse_scene_config
-from sim_world.vehicle.commander import CommanderConfig
+from sim_world.rendering.video import VideoConfig, VideoError, WorldVideoFeed
+from sim_world.scene.config import DEFAULT_SCENE, SceneConfig
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.params import PX4_PARAMS
 from sim_world.vehicle.server import LoopStats, SimVehicle, SimVehicleError
@@ -33,31 +32,6 @@ from sim_world.world import World, WorldConfig
 log = logging.getLogger(__name__)
 
 _TAKEOFF_SPEC = next(s for s in PX4_PARAMS if s.name == "MIS_TAKEOFF_ALT")
-
-
-@dataclass(frozen=True)
-class StartPose:
-    """Where the drone starts, relative to the centred pose in front of the target."""
-
-    right_m: float = 0.0
-    up_m: float = 0.0
-    distance_m: float = 2.5
-    yaw_deg: float = 0.0
-
-    @classmethod
-    def parse(cls, text: str) -> StartPose:
-        """From "right,up,distance,yaw" (metres, metres, metres, degrees)."""
-        parts = text.split(",")
-        try:
-            values = [float(v) for v in parts]
-        except ValueError:
-            raise ValueError(f"start offset {text!r}: expected four numbers right,up,distance,yaw") from None
-        if len(values) != 4:
-            raise ValueError(f"start offset {text!r}: expected four numbers right,up,distance,yaw")
-        offset = cls(*values)
-        if offset.distance_m <= 0.3:
-            raise ValueError(f"start offset {text!r}: distance must be > 0.3 m")
-        return offset
 
 
 @dataclass(frozen=True)
@@ -72,7 +46,7 @@ class SimVehicleRun:
     duration_s: float | None = None  # None: until stopped
     status_every_s: float = 0.0  # log the loop statistics this often (0: never)
     wind: WindConfig = field(default_factory=WindConfig)
-    video_faults: VideoFaults | None = None
+    video_faults: CameraFaults | None = None
     dies_at_s: float | None = None
     """An injected fault: the vehicle process kills itself (SIGKILL) at this simulated time."""
 
@@ -199,46 +173,3 @@ def serve(
     )
     out.flush()
     return 0
-
-
-def run_to_json(run: SimVehicleRun) -> dict[str, Any]:
-    """The run as JSON for the process entry point (`python -m sim_world.vehicle --config FILE`)."""
-    v = run.vehicle
-    return {
-        "vehicle": {
-            "instance": v.instance, "bind_host": v.bind_host, "remote_host": v.remote_host,
-            "remote_port": v.remote_port, "local_port": v.local_port, "sysid": v.sysid,
-            "adopt_client": v.adopt_client, "speed": v.speed,
-            "arming_boot_delay_s": v.commander.arming_boot_delay_s, "params": dict(v.params),
-            "video": v.video, "video_port": v.video_port, "video_host": v.video_host,
-            "video_fps": v.video_fps,
-        },
-        "scene": run.scene.model_dump(mode="json"),
-        "seed": run.seed,
-        "start_offset": None if run.start_offset is None else asdict(run.start_offset),
-        "image_size_px": run.image_size_px,
-        "duration_s": run.duration_s,
-        "status_every_s": run.status_every_s,
-        "wind": asdict(run.wind),
-        "video_faults": None if run.video_faults is None else asdict(run.video_faults),
-        "dies_at_s": run.dies_at_s,
-    }  # fmt: skip
-
-
-def run_from_json(data: dict[str, Any]) -> SimVehicleRun:
-    """The inverse of `run_to_json` (validated by the dataclasses and the scene model)."""
-    v = dict(data["vehicle"])
-    commander = CommanderConfig(arming_boot_delay_s=float(v.pop("arming_boot_delay_s")))
-    wind = {k: tuple(x) if isinstance(x, list) else x for k, x in data["wind"].items()}
-    return SimVehicleRun(
-        vehicle=SimVehicleConfig(commander=commander, **v),
-        scene=parse_scene_config(data["scene"], "<sim-vehicle config>"),
-        seed=int(data["seed"]),
-        start_offset=None if data["start_offset"] is None else StartPose(**data["start_offset"]),
-        image_size_px=int(data["image_size_px"]),
-        duration_s=data["duration_s"],
-        status_every_s=float(data["status_every_s"]),
-        wind=WindConfig(**wind),
-        video_faults=None if data.get("video_faults") is None else VideoFaults(**data["video_faults"]),
-        dies_at_s=data.get("dies_at_s"),
-    )

@@ -13,6 +13,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from drone_inspect_core.world_options import StartPose
 from dronectl.px4_sim_cmd import _home, parse_speed
 from sim_world.ardupilot_bridge.ardupilot_process import (
     MAX_INSTANCE,
@@ -25,7 +26,6 @@ from sim_world.ardupilot_bridge.serve import serve
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
 from sim_world.sitl.imu import SensorNoise
 from sim_world.vehicle.params import ParamError, parse_param_overrides
-from sim_world.vehicle.serve import StartPose
 
 
 def _parser() -> argparse.ArgumentParser:

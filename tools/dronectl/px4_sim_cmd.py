@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from drone_inspect_core.sim_speed import MAX_SPEED, parse_sim_speed
+from drone_inspect_core.world_options import StartPose
 from sim_world.px4_bridge.bridge import BridgeTiming
 from sim_world.px4_bridge.geodesy import HomePoint
 from sim_world.px4_bridge.px4_process import MAX_INSTANCE, Px4FolderError, find_px4_dir
@@ -21,7 +22,6 @@ from sim_world.px4_bridge.run import Px4SimConfig, serve
 from sim_world.px4_bridge.sensors import SensorNoise
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
 from sim_world.vehicle.params import ParamError, parse_param_overrides
-from sim_world.vehicle.serve import StartPose
 
 
 def parse_speed(text: str) -> float | None:

@@ -11,11 +11,12 @@ import sys
 from pathlib import Path
 
 from drone_inspect_core.sim_speed import SimSpeed, parse_sim_speed
+from drone_inspect_core.world_options import StartPose
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.params import ParamError, parse_param_overrides
-from sim_world.vehicle.serve import SimVehicleRun, StartPose, serve
+from sim_world.vehicle.serve import SimVehicleRun, serve
 
 
 def _speed(text: str) -> SimSpeed:

@@ -21,7 +21,7 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, link_faults_for
+from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels
 from controller.missions.kits.simulated import (
     SIM_HFOV_DEG,
     SimTruth,
@@ -29,7 +29,7 @@ from controller.missions.kits.simulated import (
     simulated_mavlink_kit,
     simulated_world_fields,
 )
-from controller.missions.schema import Mission, StartOffset
+from controller.missions.schema import Mission
 from controller.missions.setup import start_offset_for
 from drone_inspect_core.ports import free_port
 from flight.ardupilot_backend import ArduPilotConfig, ArduPilotVehicle
@@ -43,7 +43,7 @@ from sim_world.ardupilot_bridge.ardupilot_process import (
 )
 from sim_world.ardupilot_bridge.bridge import JsonTiming
 from sim_world.ardupilot_bridge.run import ArduPilotSimConfig
-from sim_world.ardupilot_bridge.serve import READY_PREFIX, config_to_json
+from sim_world.ardupilot_bridge.serve import READY_PREFIX
 from sim_world.sitl.imu import SensorNoise
 
 log = logging.getLogger(__name__)
@@ -89,7 +89,7 @@ def open_ardupilot_sitl_kit(
                 0,
                 client_port,
                 out_dir / TLOG_NAME,
-                faults=link_faults_for(mission),
+                faults=mission.faults.link_faults(),
                 vehicle_system_id=system_id,
             )
         )
@@ -97,7 +97,7 @@ def open_ardupilot_sitl_kit(
         sim = stack.enter_context(
             SimulatorProcess(
                 "sim_world.ardupilot_bridge",
-                config_to_json(config),
+                config,
                 out_dir / "ardupilot_sim.log",
                 READY_PREFIX,
                 start_timeout_s=ARDUPILOT_START_TIMEOUT_S,
@@ -118,7 +118,7 @@ def open_ardupilot_sitl_kit(
         camera = stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
         o = config.start_offset
         assert o is not None
-        start = StartOffset(right_m=o.right_m, up_m=o.up_m, distance_m=o.distance_m, yaw_deg=o.yaw_deg)
+        start = o
         yield simulated_mavlink_kit(
             mission, models, vehicle, camera, truth, config.scene, start,
             info={

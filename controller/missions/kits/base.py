@@ -16,7 +16,6 @@ from controller.missions.schema import Mission
 from controller.planning.grounding import TargetQuery
 from controller.planning.loop_records import TruthProbe
 from controller.planning.planners import Planner, make_planner
-from flight.link_faults import LinkFaults
 from flight.vehicle import Vehicle
 from perception.camera import Camera
 from perception.detector import Detector
@@ -128,9 +127,3 @@ def planner_for(mission: Mission, models: LoadedModels | None, truth: TruthProbe
     return models_planner(mission, models, truth) or make_planner(
         mission.planner, checkpoint=mission.checkpoint, seed=mission.scene.seed, truth_offset=truth
     )
-
-
-def link_faults_for(mission: Mission) -> LinkFaults | None:
-    """The mission's injected link faults, seeded, for the .tlog relay (None: a clean link)."""
-    spec = mission.faults.link
-    return None if spec is None else LinkFaults(**spec.model_dump(), seed=mission.faults.seed)

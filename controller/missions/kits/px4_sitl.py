@@ -20,7 +20,7 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, link_faults_for
+from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels
 from controller.missions.kits.simulated import (
     SIM_HFOV_DEG,
     SimTruth,
@@ -28,7 +28,7 @@ from controller.missions.kits.simulated import (
     simulated_mavlink_kit,
     simulated_world_fields,
 )
-from controller.missions.schema import Mission, StartOffset
+from controller.missions.schema import Mission
 from controller.missions.setup import start_offset_for
 from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
@@ -36,7 +36,7 @@ from flight.sim_launcher import SimulatorProcess
 from perception.stream_camera import StreamCamera
 from sim_world.px4_bridge.bridge import PX4_CLOCK_OFFSET_US, BridgeTiming
 from sim_world.px4_bridge.px4_process import find_px4_dir, px4_instance
-from sim_world.px4_bridge.run import OFFBOARD_PORT_BASE, READY_PREFIX, Px4SimConfig, config_to_json
+from sim_world.px4_bridge.run import OFFBOARD_PORT_BASE, READY_PREFIX, Px4SimConfig
 from sim_world.px4_bridge.sensors import SensorNoise
 
 log = logging.getLogger(__name__)
@@ -44,13 +44,6 @@ log = logging.getLogger(__name__)
 MAVSDK_PORT_BASE = 15140  # MAVSDK listens behind the relay on 15140+N (clear of the tests' 146xx-149xx)
 VIDEO_PORT_BASE = 18900  # the bridge's MJPEG stream on 18900+N
 PX4_START_TIMEOUT_S = 90.0
-
-
-def mission_start_offset(config: Px4SimConfig) -> StartOffset:
-    """The simulator's start offset as the mission schema's type."""
-    o = config.start_offset
-    assert o is not None
-    return StartOffset(right_m=o.right_m, up_m=o.up_m, distance_m=o.distance_m, yaw_deg=o.yaw_deg)
 
 
 def px4_sim_config(mission: Mission, instance: int, out_dir: Path, system_id: int) -> Px4SimConfig:
@@ -88,14 +81,14 @@ def open_px4_sitl_kit(
                 OFFBOARD_PORT_BASE + instance,
                 mavsdk_port,
                 out_dir / TLOG_NAME,
-                faults=link_faults_for(mission),
+                faults=mission.faults.link_faults(),
                 vehicle_system_id=system_id,
             )
         )
         sim = stack.enter_context(
             SimulatorProcess(
                 "sim_world.px4_bridge",
-                config_to_json(config),
+                config,
                 out_dir / "px4_sim.log",
                 READY_PREFIX,
                 start_timeout_s=PX4_START_TIMEOUT_S,
@@ -111,7 +104,7 @@ def open_px4_sitl_kit(
             )
         )
         camera = stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
-        start = mission_start_offset(config)
+        start = config.start_offset
         yield simulated_mavlink_kit(
             mission, models, vehicle, camera, truth, config.scene, start,
             info={

@@ -20,7 +20,6 @@ from controller.missions.kits.base import (
     FlightKit,
     LoadedModels,
     image_detector_for,
-    link_faults_for,
     planner_for,
 )
 from controller.missions.schema import Mission
@@ -50,7 +49,7 @@ def open_real_kit(mission: Mission, out_dir: Path, models: LoadedModels | None =
                 port + REAL_CLIENT_PORT_SHIFT,
                 out_dir / TLOG_NAME,
                 listen_host=host,
-                faults=link_faults_for(mission),
+                faults=mission.faults.link_faults(),
             )
             tlog = stack.enter_context(relay)
             url = f"udpin://127.0.0.1:{port + REAL_CLIENT_PORT_SHIFT}"

@@ -23,8 +23,9 @@ from controller.missions.kits.base import (
     named_target,
     planner_for,
 )
-from controller.missions.schema import Mission, StartOffset
+from controller.missions.schema import Mission
 from controller.missions.setup import scene_config_for, start_offset_for, wind_config_for
+from drone_inspect_core.world_options import StartPose
 from flight.pybullet_backend import PyBulletVehicle
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits
@@ -35,7 +36,7 @@ from sim_world.world import World, WorldConfig
 log = logging.getLogger(__name__)
 
 
-def world_config_for(mission: Mission, start: StartOffset) -> WorldConfig:
+def world_config_for(mission: Mission, start: StartPose) -> WorldConfig:
     return WorldConfig(
         scene=scene_config_for(mission), wind=wind_config_for(mission), start_distance_m=start.distance_m
     )
@@ -61,7 +62,7 @@ class SimWorld:
     world: World
     vehicle: SafeVehicle
     camera: SimCamera
-    start: StartOffset
+    start: StartPose
 
     def place_at_start(self) -> None:
         """Put the drone at the mission's start pose (the scenario's set-up, not a way to fly)."""

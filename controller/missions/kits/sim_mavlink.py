@@ -16,7 +16,7 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, link_faults_for
+from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels
 from controller.missions.kits.simulated import (
     SIM_HFOV_DEG,
     SimTruth,
@@ -24,21 +24,22 @@ from controller.missions.kits.simulated import (
     simulated_mavlink_kit,
     simulated_world_fields,
 )
-from controller.missions.schema import Mission, StartOffset
+from controller.missions.schema import Mission
 from controller.missions.setup import start_offset_for
 from drone_inspect_core.ports import check_free, free_port
+from drone_inspect_core.world_options import StartPose
 from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
 from flight.sim_launcher import SimulatorProcess
 from perception.stream_camera import StreamCamera
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.serve import READY_PREFIX as SIM_READY_PREFIX
-from sim_world.vehicle.serve import SimVehicleRun, run_to_json
+from sim_world.vehicle.serve import SimVehicleRun
 
 READY_TIMEOUT_S = 60.0
 
 
-def sim_vehicle_run(mission: Mission, start: StartOffset, system_id: int, relay_port: int) -> SimVehicleRun:
+def sim_vehicle_run(mission: Mission, start: StartPose, system_id: int, relay_port: int) -> SimVehicleRun:
     """The sim-vehicle for a mission: `mission.sim_speed`, PX4's boot rules, landed below the start pose,
     streaming to the relay on `relay_port`."""
     ports = mission.ports
@@ -81,14 +82,14 @@ def open_sim_mavlink_kit(
                 relay_port,
                 mavsdk_port,
                 out_dir / TLOG_NAME,
-                faults=link_faults_for(mission),
+                faults=mission.faults.link_faults(),
                 vehicle_system_id=system_id,
             )
         )
         run = sim_vehicle_run(mission, start, system_id, tlog.listen_address[1])
         sim = stack.enter_context(
             SimulatorProcess(
-                "sim_world.vehicle", run_to_json(run), out_dir / "sim_vehicle.log", SIM_READY_PREFIX,
+                "sim_world.vehicle", run, out_dir / "sim_vehicle.log", SIM_READY_PREFIX,
                 start_timeout_s=READY_TIMEOUT_S, name="sim-vehicle",
             )
         )  # fmt: skip

@@ -21,16 +21,15 @@ from controller.missions.kits.base import (
     named_target,
     planner_for,
 )
-from controller.missions.schema import Mission, StartOffset
+from controller.missions.schema import Mission
 from controller.missions.setup import scene_config_for, wind_config_for
 from drone_inspect_core.vocabulary import colour_name
+from drone_inspect_core.world_options import StartPose
 from flight.vehicle import Vehicle
 from perception.stream_camera import StreamCamera
 from sim_world.rendering.camera import CameraConfig
-from sim_world.rendering.video import VideoFaults
 from sim_world.scene.config import SceneConfig
 from sim_world.scene.sampling import sample_scene
-from sim_world.vehicle.serve import StartPose
 
 log = logging.getLogger(__name__)
 
@@ -85,22 +84,16 @@ class SimTruth:
         return float(_get_json(self.url)["truth"]["drone"]["position_enu_m"][2])
 
 
-def video_faults_for(mission: Mission) -> VideoFaults | None:
-    """The mission's camera faults, for a simulated vehicle's video."""
-    spec = mission.faults.camera
-    return None if spec is None else VideoFaults(**spec.model_dump(), seed=mission.faults.seed)
-
-
-def simulated_world_fields(mission: Mission, start: StartOffset) -> dict[str, Any]:
+def simulated_world_fields(mission: Mission, start: StartPose) -> dict[str, Any]:
     """What every simulator a mission launches is told about its world (sim-vehicle and the PX4 bridge
     alike): scene and seed, the start pose, image size, wind and camera faults."""
     return {
         "scene": scene_config_for(mission),
         "seed": mission.scene.seed,
-        "start_offset": StartPose(start.right_m, start.up_m, start.distance_m, start.yaw_deg),
+        "start_offset": start,
         "image_size_px": SIM_IMAGE_PX,
         "wind": wind_config_for(mission),
-        "video_faults": video_faults_for(mission),
+        "video_faults": mission.faults.camera_faults(),
     }
 
 
@@ -116,7 +109,7 @@ def simulated_mavlink_kit(
     camera: StreamCamera,
     truth: SimTruth,
     scene: SceneConfig,
-    start: StartOffset,
+    start: StartPose,
     info: dict[str, Any],
     tlog: TlogRecording | None,
 ) -> FlightKit:
