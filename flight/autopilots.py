@@ -80,10 +80,10 @@ class MavlinkVehicle(Vehicle):
 
     def _backend(self) -> Vehicle:
         if self.autopilot == "ardupilot":
-            from flight.ardupilot_backend import ArduPilotConfig, ArduPilotVehicle
+            from flight.ardupilot.vehicle import ArduPilotConfig, ArduPilotVehicle
 
             return ArduPilotVehicle(ArduPilotConfig(url=self.url, shown_url=self.shown_url))
-        from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+        from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 
         return MavsdkVehicle(MavsdkConfig(url=self.url, shown_url=self.shown_url))
 

@@ -13,8 +13,8 @@ import time
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from flight.ardupilot_backend import ArduPilotConfig, ArduPilotVehicle
-from flight.ardupilot_state import COPTER_MODES, ArduPilotState, flight_mode_of
+from flight.ardupilot.state import COPTER_MODES, ArduPilotState, flight_mode_of
+from flight.ardupilot.vehicle import ArduPilotConfig, ArduPilotVehicle
 from flight.autopilots import MavlinkVehicle, detect_autopilot
 from flight.errors import CommandDeniedError, ModeChangeError, VehicleConnectionError
 from flight.pymavlink_link import MavlinkLink

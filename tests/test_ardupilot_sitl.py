@@ -26,7 +26,7 @@ from pymavlink import mavutil
 
 from controller.missions.runner import run_mission
 from controller.missions.schema import load_mission
-from flight.ardupilot_backend import ArduPilotConfig, ArduPilotVehicle
+from flight.ardupilot.vehicle import ArduPilotConfig, ArduPilotVehicle
 from flight.errors import VehicleConnectionError
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import flight_guard

@@ -99,7 +99,7 @@ def test_a_command_timeout_on_a_silent_vehicle_is_a_lost_link_and_on_a_live_one_
 def test_a_command_that_times_out_on_a_silent_vehicle_raises_link_lost_not_a_refusal() -> None:
     from mavsdk.plugins.action import ActionError, ActionResult
 
-    from flight.mavsdk_link import resend_on_timeout
+    from flight.mavsdk.link import resend_on_timeout
 
     def land() -> None:
         raise ActionError(ActionResult.TIMEOUT, "land()")

@@ -16,7 +16,7 @@ import pytest
 from sim_vehicle_process import SimVehicleOptions, SimVehicleProcess
 
 from flight.errors import CommandDeniedError, ConnectionUrlError, LinkLostError, OffboardInterruptedError
-from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 from flight.moves import execute_move
 from flight.pybullet_backend import PyBulletVehicle
 from flight.relay import SET_POSITION_TARGET_LOCAL_NED, MavlinkRelay

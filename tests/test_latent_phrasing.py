@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from controller.evaluation.presence import auroc, judge_presence
+from controller.planning.grounding import TargetQuery
 from controller.planning.latent.errors import InstructionError
 from controller.training.data import TargetRef
 from controller.training.pairs import absent_names, target_name_for
 from controller.training.phrasing import (
-    TargetName,
     all_phrasings,
     describe,
     is_kind_phrase_file,
@@ -31,9 +31,9 @@ def test_held_out_synonyms_never_reach_the_training_text() -> None:
 
 def test_describe_names_the_colour_only_when_asked() -> None:
     rng = np.random.default_rng(0)
-    texts = {describe(TargetName("valve", "red"), ["go to the {target}"], "train", rng) for _ in range(30)}
+    texts = {describe(TargetQuery("valve", "red"), ["go to the {target}"], "train", rng) for _ in range(30)}
     assert texts == {f"go to the red {s}" for s in VOCABULARY.kind("valve").train}
-    plain = describe(TargetName("gauge"), ["centre the {target} now"], "heldout", rng)
+    plain = describe(TargetQuery("gauge"), ["centre the {target} now"], "heldout", rng)
     assert plain.removeprefix("centre the ").removesuffix(" now") in VOCABULARY.kind("gauge").heldout
 
 
@@ -43,10 +43,10 @@ def _ref(kind: str, colour: str, in_view: bool = True) -> TargetRef:
 
 def test_a_twin_in_view_forces_the_colour_and_absent_names_match_nothing() -> None:
     red, blue, box = _ref("valve", "red"), _ref("valve", "blue"), _ref("switchbox", "grey", in_view=False)
-    assert target_name_for(red, [red, blue], with_colour=False) == TargetName("valve", "red")
-    assert target_name_for(red, [red], with_colour=False) == TargetName("valve")
+    assert target_name_for(red, [red, blue], with_colour=False) == TargetQuery("valve", "red")
+    assert target_name_for(red, [red], with_colour=False) == TargetQuery("valve")
     names = absent_names([red, blue, box])
-    assert TargetName("gauge") in names and TargetName("valve", "yellow") in names
+    assert TargetQuery("gauge") in names and TargetQuery("valve", "yellow") in names
     assert all(
         not any(t.kind == n.kind and n.attribute in (None, t.attribute) for t in (red, blue, box))
         for n in names

@@ -216,11 +216,12 @@ def test_training_on_a_gpu_follows_the_cpu_run(synthetic: Path, tmp_path: Path) 
 def test_mirror_tta_swaps_left_and_right_and_treats_an_image_and_its_mirror_alike(synthetic: Path) -> None:
     from dataclasses import replace
 
-    from controller.evaluation.evaluate import MIRRORED_ACTION, evaluate_loaded
-    from controller.planning.actions import ALL_ACTIONS
+    from controller.evaluation.evaluate import evaluate_loaded
+    from controller.planning.actions import ALL_ACTIONS, MIRRORED_INDEX
     from controller.planning.latent.checkpoint import load_checkpoint
     from controller.planning.planners import DEFAULT_CHECKPOINT
 
+    MIRRORED_ACTION = torch.tensor(MIRRORED_INDEX)
     for action in ALL_ACTIONS:
         dx, dz = action.direction()
         assert ALL_ACTIONS[int(MIRRORED_ACTION[action.index])].direction() == (-dx, dz)

@@ -25,7 +25,7 @@ from pymavlink import mavutil
 from controller.missions.runner import run_mission
 from controller.missions.schema import load_mission
 from flight.errors import VehicleConnectionError
-from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import flight_guard
 from flight.sim_launcher import SimulatorProcess

@@ -29,7 +29,7 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
-from flight.ardupilot_backend import ArduPilotConfig, ArduPilotVehicle
+from flight.ardupilot.vehicle import ArduPilotConfig, ArduPilotVehicle
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import flight_guard
 from flight.sim_launcher import SimulatorProcess

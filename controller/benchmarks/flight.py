@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 from flight.moves import execute_move
 from flight.pybullet_backend import PyBulletVehicle
 from flight.relay import SET_POSITION_TARGET_LOCAL_NED, MavlinkRelay

@@ -24,9 +24,10 @@ from typing import Any
 import numpy as np
 
 from controller.missions.schema import SIMULATED_VEHICLES, Mission, parse_mission
+from controller.planning.grounding import TargetQuery
 from controller.planning.planners import PLANNER_NAMES
 from controller.training.instructions import builtin_templates
-from controller.training.phrasing import TargetName, describe
+from controller.training.phrasing import describe
 from drone_inspect_core.vocabulary import Vocabulary, colour_name
 
 ABSENT_TAG = "absent"
@@ -169,13 +170,13 @@ def instruction_for(mission: Mission, corpus: str, absent: bool) -> str:
     else:
         kind, attribute = targets[0]
         repeats = mission.twins or any(k == kind for k, _ in targets[1:])
-        name = TargetName(kind, attribute if repeats else None)
+        name = TargetQuery(kind, attribute if repeats else None)
     return describe(name, builtin_templates(corpus), corpus, _draw(seed, 1))
 
 
 def _absent_name(
     targets: list[tuple[str, str]], rng: np.random.Generator, with_colour: bool, vocabulary: Vocabulary
-) -> TargetName:
+) -> TargetQuery:
     """A kind no target has (by kind alone; with a colour too where `with_colour`: a twins mission's
     instruction always names one), else a kind with a colour no target of it has."""
     rng.random()  # the draw that chose "absent"
@@ -184,8 +185,8 @@ def _absent_name(
     if missing:
         kind = missing[int(rng.integers(len(missing)))]
         colours = vocabulary.colour_names
-        return TargetName(kind, colours[int(rng.integers(len(colours)))] if with_colour else None)
+        return TargetQuery(kind, colours[int(rng.integers(len(colours)))] if with_colour else None)
     kinds_known = vocabulary.kind_names
     kind = kinds_known[int(rng.integers(len(kinds_known)))]
     free = [c for c in vocabulary.colour_names if (kind, c) not in targets]
-    return TargetName(kind, free[int(rng.integers(len(free)))])
+    return TargetQuery(kind, free[int(rng.integers(len(free)))])

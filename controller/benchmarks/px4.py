@@ -27,7 +27,7 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
-from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import flight_guard
 from flight.sim_launcher import SimulatorProcess

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from controller.planning.actions import MIRRORED_INDEX, NUM_ACTIONS
+from controller.planning.actions import NUM_ACTIONS, with_mirror
 from controller.planning.latent.checkpoint import LoadedCheckpoint, load_checkpoint
 from controller.planning.latent.errors import InstructionError
 from controller.planning.latent.model import LatentDynamicsModel
@@ -232,10 +232,6 @@ def _presence(
     return judge_presence(p_present, np.concatenate(negatives)).summary()
 
 
-MIRRORED_ACTION = torch.tensor(MIRRORED_INDEX)
-"""(9,) `actions.MIRRORED_INDEX`: the action a left-right mirror image asks for."""
-
-
 def evaluate_loaded(
     ckpt: LoadedCheckpoint,
     data: ImageSet,
@@ -254,15 +250,16 @@ def evaluate_loaded(
         instructions = instructions_for(ckpt, data, setting, seed)
     dist = predict_distances(ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, data.images, instructions)
     if mirror_tta:
-        dist = dist + _mirrored_distances(ckpt, data, instructions)
+        dist = with_mirror(dist, _mirror_image_distances(ckpt, data, instructions))
     return score(dist, data, setting + ("+mirror" if mirror_tta else ""))
 
 
-def _mirrored_distances(ckpt: LoadedCheckpoint, data: ImageSet, instructions: Sequence[str]) -> torch.Tensor:
-    """(N, 9) distances of every image's left-right mirror image, in the original image's action order."""
+def _mirror_image_distances(
+    ckpt: LoadedCheckpoint, data: ImageSet, instructions: Sequence[str]
+) -> torch.Tensor:
+    """(N, 9) distances of every image's left-right mirror image, in the mirror image's action order."""
     mirrored = data.images.flip(-1).contiguous()
-    dist = predict_distances(ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, mirrored, instructions)
-    return dist[:, MIRRORED_ACTION]
+    return predict_distances(ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, mirrored, instructions)
 
 
 def evaluate_checkpoint(
@@ -295,7 +292,7 @@ def evaluate_checkpoint_modes(
     data = load_images(index.split(split), ckpt.config.image_size, eps, desc=split)
     instructions = instructions_for(ckpt, data, setting, seed)
     dist = predict_distances(ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, data.images, instructions)
-    mirrored = _mirrored_distances(ckpt, data, instructions) if any(mirror_modes) else None
+    mirrored = _mirror_image_distances(ckpt, data, instructions) if any(mirror_modes) else None
     presence = None
     if ckpt.model.presence is not None and data.targets:
         empty_rows = index.split("empty") if split == "test" else []
@@ -307,7 +304,9 @@ def evaluate_checkpoint_modes(
         presence = _presence(ckpt, data, instructions, empty, setting, seed)
     results = []
     for mirror in mirror_modes:
-        result = score(dist + mirrored if mirror else dist, data, setting + ("+mirror" if mirror else ""))
+        result = score(
+            with_mirror(dist, mirrored) if mirror else dist, data, setting + ("+mirror" if mirror else "")
+        )
         _group_rank1(result, data)
         result.presence = presence
         log.info("%s on %s/%s (%d images): rank-1 %.4f", model_dir, data_dir, split, result.n, result.rank1)

@@ -89,7 +89,7 @@ _STREAM_SCHEMES = ("http://", "https://", "rtsp://", "file://")
 
 AutopilotName = Literal["auto", "px4", "ardupilot"]
 """A MAVLink URL's autopilot (`Mission.autopilot`): "auto" (told by its HEARTBEAT), "px4" (flown with
-MAVSDK) or "ardupilot" (flown in GUIDED mode, `flight.ardupilot_backend`)."""
+MAVSDK) or "ardupilot" (flown in GUIDED mode, `flight.ardupilot.vehicle`)."""
 
 
 class PortSpec(StrictModel):

@@ -12,8 +12,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import Any, TypeVar
 
 from drone_inspect_core.centring import axis_signs
+
+ArrayT = TypeVar("ArrayT", bound=Any)
+"""A numpy array or a torch tensor (both index the same way)."""
 
 
 class XMove(IntEnum):
@@ -62,6 +66,12 @@ NUM_ACTIONS = 9
 ALL_ACTIONS: tuple[Action, ...] = tuple(Action.from_index(i) for i in range(NUM_ACTIONS))
 MIRRORED_INDEX: tuple[int, ...] = tuple(3 * (2 - i // 3) + i % 3 for i in range(NUM_ACTIONS))
 """The action index that a left-right mirror image asks for, per index: left ↔ right, up/down kept."""
+
+
+def with_mirror(distances: ArrayT, mirrored: ArrayT) -> ArrayT:
+    """Mirror test-time augmentation, once for the planner and its evaluation: each image's (…, 9)
+    distances plus its left-right mirror image's, the mirror's actions swapped back (numpy or torch)."""
+    return distances + mirrored[..., list(MIRRORED_INDEX)]
 
 
 def label_from_offset(du_px: float, dv_px: float, epsilon_px: float) -> Action:

@@ -82,15 +82,13 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from controller.planning.actions import Action, XMove, ZMove
+from controller.planning.actions import ALL_ACTIONS, Action, XMove, ZMove
 from controller.planning.grounding import TargetQuery, describe_seen, parse_instruction, select_target
-from controller.planning.loop_boundary import refinement_signs, second_choice
-from controller.planning.loop_boundary import sign as _sign
 from controller.planning.loop_records import (
     CentringConfig,
     CentringResult,
@@ -111,6 +109,63 @@ from perception.errors import CameraFrozenError
 from perception.types import Detection, Frame
 
 log = logging.getLogger(__name__)
+
+
+# ------------------------------------------------------------------ the choices near and away from ε
+# Pure functions of the detector's offset, the stop threshold and the planner's choice; the loop keeps
+# the per-run budgets. The boundary band is (stop threshold, ε + 2 × stopping margin].
+
+
+def sign(value: float) -> int:
+    return (value > 0) - (value < 0)
+
+
+def band_px(epsilon_px: float, stop_threshold_px: float) -> float:
+    """The boundary band's outer edge: ε plus twice the stopping margin (ε − stop threshold)."""
+    return epsilon_px + 2.0 * (epsilon_px - stop_threshold_px)
+
+
+def refinement_signs(
+    epsilon_px: float,
+    stop_threshold_px: float,
+    offset_px: tuple[float, float] | None,
+    action: Action,
+) -> tuple[int, int] | None:
+    """(right, up) signs of the boundary refinement for `action`, or None where none applies.
+
+    An axis is refined where the planner chose no move on it while the detector's offset on
+    it lies in the boundary band; a "no move" at all is refined only if no axis lies beyond
+    the band (else the planner is wrong, not the boundary).
+    """
+    if offset_px is None:
+        return None
+    edge = band_px(epsilon_px, stop_threshold_px)
+    if action.is_none and max(abs(o) for o in offset_px) > edge:
+        return None
+    du, dv = offset_px
+    towards = (sign(du), -sign(dv))  # target right → fly right; target below → fly down
+    signs = tuple(
+        want if chosen == 0 and stop_threshold_px < abs(off) <= edge else 0
+        for off, chosen, want in zip((du, dv), action.direction(), towards, strict=True)
+    )
+    return signs if any(signs) else None  # type: ignore[return-value]
+
+
+def second_choice(
+    epsilon_px: float,
+    stop_threshold_px: float,
+    offset_px: tuple[float, float] | None,
+    distances: Sequence[float] | None,
+) -> Action | None:
+    """The planner's best-ranked move after it chose "no move" with the target beyond the boundary
+    band on some axis; None near the boundary (the refinement's business, or a fair "stay"), or
+    where the planner did not rank every action."""
+    if distances is None or offset_px is None:
+        return None
+    if max(abs(o) for o in offset_px) <= band_px(epsilon_px, stop_threshold_px):
+        return None
+    moves = [a for a in ALL_ACTIONS if not a.is_none]
+    return min(moves, key=lambda a: distances[a.index])
 
 
 @dataclass
@@ -211,14 +266,14 @@ class CentringLoop:
         if refine is not None:
             state.refinements += 1
             record.event = StepEvent.REFINEMENT
-            for axis, sign in enumerate(refine):
-                if sign:
-                    move[axis] = sign * cfg.min_move_m
+            for axis, towards in enumerate(refine):
+                if towards:
+                    move[axis] = towards * cfg.min_move_m
         state.stalls = 0
         record.move_m = (move[0], move[1])
         record.move = self._fly(*record.move_m)
         state.before_move = record.frame.image
-        moved = Action(XMove(_sign(move[0]) + 1), ZMove(1 - _sign(move[1])))
+        moved = Action(XMove(sign(move[0]) + 1), ZMove(1 - sign(move[1])))
         state.last_move = (moved, record.move_m)
         return None
 
@@ -230,14 +285,14 @@ class CentringLoop:
         du, dv = record.offset_px
         focal_px = record.frame.width / 2.0 / math.tan(math.radians(cfg.hfov_deg) / 2.0)
         metres_per_px = cfg.move_gain * cfg.assumed_distance_m / focal_px
-        towards = (_sign(du), -_sign(dv))  # target right → fly right; target below (dv > 0) → fly down
+        towards = (sign(du), -sign(dv))  # target right → fly right; target below (dv > 0) → fly down
         return tuple(  # type: ignore[return-value]
             abs(off) * metres_per_px if sign == want else 0.0  # disagreeing: clamped up to the minimum
             for off, sign, want in zip((du, dv), action.direction(), towards, strict=True)
         )
 
     def _second_choice(self, record: StepRecord, state: _RunState, plan: Plan) -> Action | None:
-        """`loop_boundary.second_choice`, while the run's second-choice budget lasts."""
+        """`second_choice`, while the run's second-choice budget lasts."""
         if state.second_choices >= self.config.max_second_choices or record.stop_threshold_px is None:
             return None
         return second_choice(
@@ -245,7 +300,7 @@ class CentringLoop:
         )
 
     def _refinement(self, record: StepRecord, state: _RunState, action: Action) -> tuple[int, int] | None:
-        """`loop_boundary.refinement_signs`, while the run's refinement budget lasts."""
+        """`refinement_signs`, while the run's refinement budget lasts."""
         if state.refinements >= self.config.max_refinements or record.stop_threshold_px is None:
             return None
         return refinement_signs(self.config.epsilon_px, record.stop_threshold_px, record.offset_px, action)

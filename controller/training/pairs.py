@@ -22,9 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from controller.planning.grounding import TargetQuery
 from controller.planning.latent.tokenizer import InstructionTokenizer
 from controller.training.data import TargetRef
-from controller.training.phrasing import COLOURS, TargetName, phrasing_table, synonyms
+from controller.training.phrasing import COLOURS, phrasing_table, synonyms
 from drone_inspect_core.vocabulary import shipped_vocabulary
 
 NAMED_FRACTION = 0.5
@@ -43,28 +44,28 @@ class SampledPairs:
     """(B,) bool: the asked-for target is in view."""
 
 
-def target_name_for(target: TargetRef, visible: Sequence[TargetRef], with_colour: bool) -> TargetName:
+def target_name_for(target: TargetRef, visible: Sequence[TargetRef], with_colour: bool) -> TargetQuery:
     """How to ask for `target` among the targets in view: its kind, and its colour where needed or wanted."""
     twins = sum(1 for t in visible if t.kind == target.kind) > 1
     colour = target.attribute if (twins or with_colour) else None
-    return TargetName(target.kind, colour)
+    return TargetQuery(target.kind, colour)
 
 
-def named_target_name(refs: Sequence[TargetRef], with_colour: bool) -> TargetName:
+def named_target_name(refs: Sequence[TargetRef], with_colour: bool) -> TargetQuery:
     """How to ask for an image's named target (`refs[0]`) among the targets it shows."""
     visible = [t for t in refs if t.in_view] or [refs[0]]
     return target_name_for(refs[0], visible, with_colour)
 
 
-def absent_names(targets: Sequence[TargetRef]) -> list[TargetName]:
+def absent_names(targets: Sequence[TargetRef]) -> list[TargetQuery]:
     """Names that match no target of the scene: a kind none has, or a kind with a colour none of it has."""
     kinds = {t.kind for t in targets}
-    names = [TargetName(k) for k in shipped_vocabulary().kind_names if k not in kinds]
+    names = [TargetQuery(k) for k in shipped_vocabulary().kind_names if k not in kinds]
     for kind in sorted(kinds):
         colours = {t.attribute for t in targets if t.kind == kind}
         if None in colours:
             continue  # a target of unknown colour could be any colour
-        names += [TargetName(kind, c) for c in COLOURS if c not in colours]
+        names += [TargetQuery(kind, c) for c in COLOURS if c not in colours]
     return names
 
 
@@ -88,7 +89,7 @@ class DescriptionSampler:
         self.row_of = {key: i for i, key in enumerate(keys)}
         self.ids = tokenizer.batch(texts)  # (K, L)
 
-    def _ids_row(self, name: TargetName, rng: np.random.Generator) -> int:
+    def _ids_row(self, name: TargetQuery, rng: np.random.Generator) -> int:
         n_syn = len(synonyms(name.kind, self.corpus))
         key = (name.kind, name.attribute, int(rng.integers(n_syn)), int(rng.integers(len(self.templates))))
         return self.row_of[key]

@@ -18,11 +18,11 @@ from __future__ import annotations
 
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from controller.planning.grounding import TargetQuery
 from controller.planning.latent.errors import InstructionError
 from drone_inspect_core.vocabulary import VocabularyError, shipped_vocabulary
 
@@ -33,15 +33,7 @@ CORPORA: tuple[str, ...] = ("fixed", "train", "heldout")
 COLOURS: tuple[str, ...] = shipped_vocabulary().colour_names
 
 
-@dataclass(frozen=True)
-class TargetName:
-    """What an instruction asks for: a kind, and the trim colour when it names one."""
-
-    kind: str
-    attribute: str | None = None
-
-
-def noun_phrase(name: TargetName, synonym: str) -> str:
+def noun_phrase(name: TargetQuery, synonym: str) -> str:
     """'red valve' / 'handwheel': the colour (if any) before the synonym."""
     return f"{name.attribute} {synonym}" if name.attribute else synonym
 
@@ -65,7 +57,7 @@ def synonyms(kind: str, corpus: str) -> tuple[str, ...]:
         raise InstructionError(str(exc)) from None
 
 
-def describe(name: TargetName, templates: Sequence[str], corpus: str, rng: np.random.Generator) -> str:
+def describe(name: TargetQuery, templates: Sequence[str], corpus: str, rng: np.random.Generator) -> str:
     """One instruction naming `name`: a random template and a random synonym of its kind."""
     template = templates[int(rng.integers(len(templates)))]
     options = synonyms(name.kind, corpus)
@@ -84,7 +76,7 @@ def phrasing_table(templates: Sequence[str], corpus: str) -> list[tuple[PhraseKe
     for kind in shipped_vocabulary().kind_names:
         for s, synonym in enumerate(synonyms(kind, corpus)):
             for attribute in (None, *COLOURS):
-                phrase = noun_phrase(TargetName(kind, attribute), synonym)
+                phrase = noun_phrase(TargetQuery(kind, attribute), synonym)
                 out.extend(
                     ((kind, attribute, s, t), fill_phrase(tpl, phrase)) for t, tpl in enumerate(templates)
                 )

@@ -147,7 +147,7 @@ def main(argv: list[str]) -> int:
     args = parser.parse_args(argv)
     if not args.verbose:
         logging.getLogger().setLevel(logging.WARNING)
-        logging.getLogger("flight.mavsdk_backend").setLevel(logging.INFO)  # what a wait is waiting for
+        logging.getLogger("flight.mavsdk.vehicle").setLevel(logging.INFO)  # what a wait is waiting for
     try:
         mission = load_mission(args.mission, _overrides(args))
         if args.seed is not None:

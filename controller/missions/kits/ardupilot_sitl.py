@@ -4,7 +4,7 @@
 the drone landed below the mission's start pose, its camera as MJPEG, and ArduCopter SITL on the JSON
 interface in lockstep with it. The controller then talks to ArduPilot exactly as to a real vehicle:
 ArduPilot sends its MAVLink to 127.0.0.1 only, to the port the .tlog relay took (a free one, locked to
-this run's system id), which forwards to the GUIDED-mode backend (`flight.ardupilot_backend`) on
+this run's system id), which forwards to the GUIDED-mode backend (`flight.ardupilot.vehicle`) on
 another free port; the camera is read with OpenCV from the MJPEG stream (a free port too); the
 bridge's `/truth.json` is read for judging only.
 
@@ -32,7 +32,7 @@ from controller.missions.kits.simulated import (
 from controller.missions.schema import Mission
 from controller.missions.setup import start_offset_for
 from drone_inspect_core.ports import free_port
-from flight.ardupilot_backend import ArduPilotConfig, ArduPilotVehicle
+from flight.ardupilot.vehicle import ArduPilotConfig, ArduPilotVehicle
 from flight.relay import MavlinkRelay
 from flight.sim_launcher import SimulatorProcess
 from perception.stream_camera import StreamCamera

@@ -30,7 +30,7 @@ from controller.missions.kits.simulated import (
 )
 from controller.missions.schema import Mission
 from controller.missions.setup import start_offset_for
-from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
 from flight.sim_launcher import SimulatorProcess
 from perception.stream_camera import StreamCamera

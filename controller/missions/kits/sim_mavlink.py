@@ -28,7 +28,7 @@ from controller.missions.schema import Mission
 from controller.missions.setup import start_offset_for
 from drone_inspect_core.ports import check_free, free_port
 from drone_inspect_core.world_options import StartPose
-from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
 from flight.sim_launcher import SimulatorProcess
 from perception.stream_camera import StreamCamera

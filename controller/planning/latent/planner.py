@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 import torch
 
-from controller.planning.actions import MIRRORED_INDEX, Action
+from controller.planning.actions import Action, with_mirror
 from controller.planning.latent.checkpoint import load_checkpoint
 from controller.planning.latent.errors import ImageInputError
 from controller.planning.latent.image_encoder import fused_for_inference
@@ -112,7 +112,7 @@ class LatentPlanner:
         dist = outputs[0].astype(np.float32, copy=False)  # (M, 9)
         presence = outputs[1].astype(np.float32, copy=False) if len(outputs) > 1 else None  # (M,)
         if self.mirror:
-            dist = dist[:n] + dist[n:][:, list(MIRRORED_INDEX)]
+            dist = with_mirror(dist[:n], dist[n:])
             presence = None if presence is None else (presence[:n] + presence[n:]) / 2.0
         return [Action.from_index(int(i)) for i in dist.argmin(axis=1)], dist, presence
 

@@ -1,4 +1,4 @@
-"""How the ArduPilot backend (`flight.ardupilot_backend`) reaches a vehicle, and what it asks it to send."""
+"""How the ArduPilot backend (`flight.ardupilot.vehicle`) reaches a vehicle, and what it asks it to send."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from flight.ardupilot_state import HOLD_MODES
+from flight.ardupilot.state import HOLD_MODES
 from flight.safety import FlightTimeouts
 from flight.urls import validate_connection_url
 

@@ -38,8 +38,8 @@ from collections.abc import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from flight.ardupilot_config import MESSAGE_RATES_HZ, ArduPilotConfig
-from flight.ardupilot_state import COPTER_MODES, GUIDED, ArduPilotState, mode_name
+from flight.ardupilot.config import MESSAGE_RATES_HZ, ArduPilotConfig
+from flight.ardupilot.state import COPTER_MODES, GUIDED, ArduPilotState, mode_name
 from flight.errors import (
     CommandDeniedError,
     FlightTimeoutError,

@@ -42,7 +42,7 @@ from flight.errors import (
     OffboardInterruptedError,
     VehicleConnectionError,
 )
-from flight.mavsdk_link import MavsdkConfig, TelemetryCache, resend_on_timeout, route_mavsdk_logs
+from flight.mavsdk.link import MavsdkConfig, TelemetryCache, resend_on_timeout, route_mavsdk_logs
 from flight.types import FlightMode, Telemetry, VelocityBody
 from flight.vehicle import Deadline, Vehicle, wait_for
 

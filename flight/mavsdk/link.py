@@ -3,7 +3,7 @@
 `TelemetryCache` subscribes to MAVSDK's telemetry streams and keeps their latest values
 under a lock. MAVSDK's sync callbacks all run on one MAVSDK thread, and blocking calls
 return through it: the callbacks here only store values (and tell the link monitor the
-vehicle was heard). `flight.mavsdk_backend.MavsdkVehicle` reads the cache.
+vehicle was heard). `flight.mavsdk.vehicle.MavsdkVehicle` reads the cache.
 """
 
 from __future__ import annotations
