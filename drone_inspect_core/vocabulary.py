@@ -86,11 +86,13 @@ class AttributeColour:
 
 @dataclass(frozen=True, eq=False)
 class Vocabulary:
-    """Kinds and colours, in their declared order (the first kinds are the shipped ones). Compared and
-    hashed by identity: a changed vocabulary is a new object."""
+    """Kinds and colours, in their declared order (the first kinds are the shipped ones), and the other
+    words an instruction may hold. Compared and hashed by identity: a changed vocabulary is a new object."""
 
     kinds: Mapping[str, TargetKind]
     colours: Mapping[str, AttributeColour]
+    instruction_words: frozenset[str] = frozenset()
+    """Words that are neither targets nor colours but belong in an instruction ("centre", "the", "it")."""
 
     @property
     def kind_names(self) -> tuple[str, ...]:
@@ -142,7 +144,20 @@ class Vocabulary:
                 kind = replace(old, other=tuple(dict.fromkeys((*old.other, *kind.words))))
             merged[name] = kind
         _check_words_unique(merged)
-        return Vocabulary(merged, self.colours)
+        return Vocabulary(merged, self.colours, self.instruction_words)
+
+    def with_glossary(self, glossary: Mapping[str, str]) -> Vocabulary:
+        """This vocabulary with a site's own words for its kinds (`{manometer: gauge, breaker panel:
+        switchbox}`): the parser accepts them and the planner hears the kind's own trained noun."""
+        extra: dict[str, TargetKind] = {}
+        for phrase, kind_name in glossary.items():
+            kind = self.kind(kind_name)
+            words = normalise_phrase(phrase)
+            if not words:
+                raise VocabularyError(f"glossary: {phrase!r} holds no word")
+            base = extra.get(kind.name, TargetKind(kind.name, kind.noun, ()))
+            extra[kind.name] = replace(base, other=(*base.other, words))
+        return self.with_kinds(extra) if extra else self
 
 
 def hex_to_rgb(colour: str) -> tuple[int, int, int]:
@@ -268,12 +283,13 @@ def _check_words_unique(kinds: Mapping[str, TargetKind]) -> None:
 
 def parse_vocabulary(data: Any, base_dir: Path | None = None, source: str = "vocabulary") -> Vocabulary:
     """A whole vocabulary mapping (`kinds:` and `colours:`)."""
-    if not isinstance(data, Mapping) or set(data) - {"kinds", "colours"}:
-        raise VocabularyError(f"{source}: expected the sections `kinds` and `colours`")
+    if not isinstance(data, Mapping) or set(data) - {"kinds", "colours", "instruction_words"}:
+        raise VocabularyError(f"{source}: expected the sections `kinds`, `colours` and `instruction_words`")
     kinds = parse_kinds(data.get("kinds"), base_dir, f"{source}: kinds")
     if not kinds:
         raise VocabularyError(f"{source}: no kinds")
     _check_words_unique(kinds)
+    extras = _phrases(data.get("instruction_words"), f"{source}: instruction_words")
     colours: dict[str, AttributeColour] = {}
     for name, value in (data.get("colours") or {}).items():
         where = f"{source}: colours.{name}"
@@ -287,7 +303,7 @@ def parse_vocabulary(data: Any, base_dir: Path | None = None, source: str = "voc
         colours[name] = AttributeColour(name, rgb, words)
     if not colours:
         raise VocabularyError(f"{source}: no colours")
-    return Vocabulary(kinds, colours)
+    return Vocabulary(kinds, colours, frozenset(extras))
 
 
 @functools.cache
@@ -344,3 +360,21 @@ def _vocabulary_with(key: str) -> Vocabulary:
     for section in json.loads(key):
         vocabulary = vocabulary.with_kinds(parse_kinds(section))
     return vocabulary
+
+
+def load_glossary(path: str | Path) -> dict[str, str]:
+    """A site glossary file: YAML `phrase: kind` lines (`manometer: gauge`); `VocabularyError` naming the
+    file and the line's phrase otherwise (the kinds are checked when the glossary joins a vocabulary)."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise VocabularyError(f"glossary {path}: no such file") from None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise VocabularyError(f"glossary {path}: cannot read it: {str(exc).splitlines()[0]}") from None
+    if not isinstance(data, Mapping) or not data:
+        raise VocabularyError(f"glossary {path}: expected `phrase: kind` lines, e.g. `manometer: gauge`")
+    bad = [str(k) for k, v in data.items() if not isinstance(k, str) or not isinstance(v, str)]
+    if bad:
+        raise VocabularyError(f"glossary {path}: {bad[0]!r}: expected `phrase: kind`")
+    return {str(k): str(v) for k, v in data.items()}

@@ -38,7 +38,7 @@ from controller.missions.report import (
 )
 from controller.missions.results import MissionResult, count_steps, judge, wrong_target
 from controller.missions.schema import ARDUPILOT_SITL, PX4_SITL, SIM, SIM_MAVLINK, Mission
-from controller.planning.grounding import TargetQuery
+from controller.planning.grounding import TargetQuery, understand
 from controller.planning.loop import CentringLoop
 from controller.planning.loop_records import (
     CentringConfig,
@@ -48,6 +48,7 @@ from controller.planning.loop_records import (
     count_second_choices,
 )
 from drone_inspect_core.centring import default_epsilon_px
+from drone_inspect_core.vocabulary import Vocabulary
 from flight.moves import take_off_to_start
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, flight_guard
@@ -65,14 +66,32 @@ def epsilon_for(mission: Mission, kit: FlightKit) -> float:
     return kit.epsilon_px or mission.epsilon_px or default_epsilon_px(kit.image_width_px)
 
 
+def mission_vocabulary(mission: Mission) -> Vocabulary:
+    """The words of a mission: the shipped ones, the kinds of its scene (a file's too, for a simulated
+    vehicle) and of the mission itself, and its glossary."""
+    if mission.is_real:
+        return mission.vocabulary
+    from controller.missions.setup import scene_config_for  # the simulator's scene code: simulated only
+
+    return scene_config_for(mission).vocabulary.with_glossary(mission.glossary_words())
+
+
 def loop_config(
-    mission: Mission, epsilon_px: float, instruction: str, target: TargetQuery | None = None
+    mission: Mission,
+    epsilon_px: float,
+    instruction: str,
+    target: TargetQuery | None = None,
+    vocabulary: Vocabulary | None = None,
 ) -> CentringConfig:
+    """The loop's configuration for a flight of `mission`. The instruction is understood here, before
+    anything flies: one the vocabulary cannot act on raises `InstructionRefused` naming its word."""
+    vocabulary = vocabulary or mission_vocabulary(mission)
     return CentringConfig(
         **mission.loop.model_dump(),
         epsilon_px=epsilon_px,
         instruction=instruction,
-        target=target,
+        target=target or understand(instruction, vocabulary),
+        vocabulary=vocabulary,
         max_steps=mission.max_steps,
         timeout_s=mission.timeout_s,
         stop_margin_px=mission.stop_margin_px,

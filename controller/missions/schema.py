@@ -58,7 +58,7 @@ from pydantic import (
     model_validator,
 )
 
-from controller.planning.grounding import parse_instruction
+from controller.planning.grounding import InstructionRefused, parse_instruction, understand
 from controller.planning.loop_records import LoopSettings, Outcome
 from controller.planning.planners import PLANNERS, PlannerName
 from drone_inspect_core.config_files import ConfigFileError, Range, StrictModel, read_yaml, validate_mapping
@@ -66,6 +66,7 @@ from drone_inspect_core.sim_speed import parse_sim_speed
 from drone_inspect_core.vocabulary import (
     Vocabulary,
     VocabularyError,
+    load_glossary,
     shipped_vocabulary,
     validated_kinds,
     vocabulary_with,
@@ -273,6 +274,9 @@ class Mission(StrictModel):
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
     tags: tuple[str, ...] = ()
     description: str = ""
+    glossary: str | dict[str, str] | None = None
+    """A site's own words for the kinds (`{manometer: gauge}`, or a glossary file, relative to the mission
+    file): the instruction may use them, and the planner hears the kind's trained noun."""
     kinds: dict[str, dict[str, Any]] = Field(default_factory=dict)
     """Target kinds the mission adds (`drone_inspect_core.vocabulary.parse_kind`; images relative to the
     mission file): the scene may draw them, the instruction may name them."""
@@ -340,15 +344,44 @@ class Mission(StrictModel):
         """The shipped vocabulary, with the kinds of an inline scene config and of the mission itself (a
         scene file's own kinds join when the scene is built: `controller.missions.setup`)."""
         inline = self.scene.config.get("kinds") if isinstance(self.scene.config, dict) else None
-        return vocabulary_with(inline or {}, self.kinds)
+        return vocabulary_with(inline or {}, self.kinds).with_glossary(self.glossary_words())
+
+    def glossary_words(self) -> dict[str, str]:
+        """The glossary's `phrase: kind` mapping (read from its file when it names one)."""
+        if self.glossary is None:
+            return {}
+        return load_glossary(self.glossary) if isinstance(self.glossary, str) else dict(self.glossary)
+
+    @field_validator("glossary", mode="before")
+    @classmethod
+    def _glossary_file(cls, value: object, info: ValidationInfo) -> object:
+        """A glossary file is found relative to the mission file, and read now: a bad one is named."""
+        if isinstance(value, str):
+            base_dir = (info.context or {}).get("base_dir")
+            path = Path(value).expanduser()
+            value = str(path if path.is_absolute() or base_dir is None else base_dir / path)
+            try:
+                load_glossary(value)
+            except VocabularyError as exc:
+                raise ValueError(str(exc)) from None
+        return value
 
     @model_validator(mode="after")
     def _known_kind(self) -> Mission:
+        try:
+            vocabulary = self.vocabulary  # the glossary's kinds are checked here
+        except VocabularyError as exc:
+            raise ValueError(f"glossary: {exc}") from None
         if self.target_kind is not None and not isinstance(self.scene.config, str):
             try:
-                self.vocabulary.kind(self.target_kind)
+                vocabulary.kind(self.target_kind)
             except VocabularyError as exc:
                 raise ValueError(f"target_kind: {exc}") from None
+        if self.instruction is not None and not isinstance(self.scene.config, str):  # (a scene file's
+            try:  # own kinds join when its scene is built; the runner checks again with them then)
+                understand(self.instruction, vocabulary)
+            except InstructionRefused as exc:
+                raise ValueError(f"instruction: {exc}") from None
         return self
 
     @model_validator(mode="after")

@@ -23,6 +23,7 @@ any kind is the target (today's single-target behaviour).
 
 from __future__ import annotations
 
+import difflib
 import functools
 import re
 from collections.abc import Iterable, Sequence
@@ -95,6 +96,77 @@ def parse_instruction(text: str, vocabulary: Vocabulary | None = None) -> Target
 
     attribute = colour_of[min(colours, key=gap).group()] if colours else None
     return TargetQuery(kind_of[kind_match.group()], attribute)
+
+
+DETERMINERS = frozenset({"the", "a", "an", "that", "this", "my", "our", "your", "its"})
+"""Words after which a noun stands: "the flux capacitor", "that pump"."""
+
+
+class InstructionRefused(ValueError):
+    """An instruction the vocabulary cannot act on; the message says which words and what is known."""
+
+
+def unknown_nouns(text: str, vocabulary: Vocabulary | None = None) -> list[str]:
+    """The phrases of `text` that stand where a target's name would (after a determiner, past any
+    colour words) and that the vocabulary does not know: ["flux capacitor"] for "centre the flux
+    capacitor"; [] for "centre it" or "centre the red one"."""
+    vocabulary = vocabulary or shipped_vocabulary()
+    known = set(vocabulary.instruction_words)
+    for words in [
+        *(c.words for c in vocabulary.colours.values()),
+        *(k.words for k in vocabulary.kinds.values()),
+    ]:
+        known.update(w for phrase in words for w in phrase.split())
+    words = normalise(text).split()
+    found: list[str] = []
+    i = 0
+    while i < len(words):
+        if words[i] not in DETERMINERS:
+            i += 1
+            continue
+        j = i + 1
+        while j < len(words) and words[j] in known and words[j] not in vocabulary.instruction_words:
+            j += 1  # colour words between the determiner and the noun
+        run: list[str] = []
+        while j < len(words) and words[j] not in known and words[j] not in DETERMINERS:
+            run.append(words[j])
+            j += 1
+        if run:
+            found.append(" ".join(run))
+        i = max(j, i + 1)
+    return found
+
+
+def understand(text: str, vocabulary: Vocabulary | None = None) -> TargetQuery:
+    """What the instruction asks for, or `InstructionRefused` before anything flies: an instruction that
+    names no known kind but puts an unknown noun where a target's name would stand ("centre the flux
+    capacitor") is refused with the word and the closest known names; "centre it" (no noun) is not."""
+    vocabulary = vocabulary or shipped_vocabulary()
+    if not normalise(text):
+        raise InstructionRefused("the instruction is empty: say what to centre, e.g. 'centre the gauge'")
+    query = parse_instruction(text, vocabulary)
+    if query.kind is not None:
+        return query
+    unknown = unknown_nouns(text, vocabulary)
+    if unknown:
+        phrases = sorted({p for kind in vocabulary.kinds.values() for p in kind.words})
+        word = unknown[0]
+        close = difflib.get_close_matches(word, phrases, n=3, cutoff=0.0)
+        raise InstructionRefused(
+            f"{text.strip()!r}: no known target is called {word!r}; the closest known: "
+            f"{', '.join(close)} (a site glossary can add words: `{word}: <kind>`)"
+        )
+    return query
+
+
+def planner_instruction(query: TargetQuery, vocabulary: Vocabulary | None = None) -> str:
+    """The words the latent planner hears for `query`: its kind's trained noun and its colour, in the
+    planner's fixed phrase, whatever words the operator used. So the planner and the loop (which tests
+    ε on `query`'s target) always agree on what was asked, and an operator's word the model never heard
+    (a synonym, a site's glossary word) reaches it as one it trained on."""
+    vocabulary = vocabulary or shipped_vocabulary()
+    noun = vocabulary.noun(query.kind) if query.kind is not None else "target"
+    return f"center the {query.attribute + ' ' if query.attribute else ''}{noun}"
 
 
 def select_target(detections: Iterable[Detection], query: TargetQuery) -> Detection | None:

@@ -88,7 +88,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from controller.planning.actions import ALL_ACTIONS, Action, XMove, ZMove
-from controller.planning.grounding import TargetQuery, describe_seen, parse_instruction, select_target
+from controller.planning.grounding import (
+    TargetQuery,
+    describe_seen,
+    parse_instruction,
+    planner_instruction,
+    select_target,
+)
 from controller.planning.loop_records import (
     CentringConfig,
     CentringResult,
@@ -237,7 +243,7 @@ class CentringLoop:
         observation = Observation(
             record.frame.image,
             record.detection,
-            cfg.instruction,
+            self._planner_words(record.detection),
             cfg.epsilon_px,
             record.stop_threshold_px,
             record.detections,
@@ -385,7 +391,15 @@ class CentringLoop:
     @property
     def target(self) -> TargetQuery:
         """What the loop centres: the configured query, else the instruction's reading."""
-        return self.config.target or parse_instruction(self.config.instruction)
+        return self.config.target or parse_instruction(self.config.instruction, self.config.vocabulary)
+
+    def _planner_words(self, detection: Detection | None) -> str:
+        """What the planner hears: the target the loop tests ε on, in the words the planner trained on
+        (`grounding.planner_instruction`); an unnamed kind is the kind of the detection it centres."""
+        query = self.target
+        if query.kind is None and detection is not None and detection.kind is not None:
+            query = TargetQuery(detection.kind, query.attribute)
+        return planner_instruction(query, self.config.vocabulary)
 
     def _detect_all(self, image: np.ndarray) -> tuple[Detection, ...]:
         """Every detection, strongest first: `detect_all` where the detector has it, else `detect`'s one."""

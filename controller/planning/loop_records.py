@@ -14,6 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from controller.planning.actions import Action
 from controller.planning.grounding import TargetQuery
+from drone_inspect_core.vocabulary import Vocabulary
 from flight.moves import MoveResult
 from flight.types import Telemetry
 from perception.types import Detection, Frame
@@ -88,10 +89,14 @@ class CentringConfig(LoopSettings):
     """Everything one run of the loop needs besides its components: the settings, and this run's ε,
     words, target and limits."""
 
+    model_config = ConfigDict(extra="forbid", frozen=True, arbitrary_types_allowed=True)
+
     epsilon_px: float = Field(gt=0.0)
     instruction: str = "center the gauge"
     target: TargetQuery | None = None
-    """The target to centre among those detected; None: `parse_instruction(instruction)`."""
+    """The target to centre among those detected; None: `parse_instruction(instruction, vocabulary)`."""
+    vocabulary: Vocabulary | None = None
+    """The words of this run (a mission's own kinds, a site glossary); None: the shipped vocabulary."""
     max_steps: int = Field(default=20, ge=1)
     timeout_s: float = Field(default=120.0, gt=0.0)
     fresh_frame_s: float = Field(default=0.0, ge=0.0)

@@ -110,10 +110,9 @@ class LatentPlannerAdapter:
 class ClassicPlanner:
     """Detector bounding box → direction, per axis, with a deadband (no learning).
 
-    Its target is its own reading of the instruction: `parse_instruction` (keywords)
-    then `select_target` among `observation.detections`, so an instruction that avoids
-    the lexicon's words falls back to the strongest detection, whatever it is (an honest
-    baseline). With no detections listed it steers to `observation.detection`.
+    Its target is the loop's (`observation.detection`, the detection the loop tests ε on);
+    without one, its own reading of the instruction (`parse_instruction`, then
+    `select_target` among `observation.detections`).
     Moves on an axis only when the detected centre lies more than `deadband_px`
     from the image centre on it; `deadband_px` None uses the loop's stop threshold
     (ε less the stopping margin), so the classic pipeline stops moving exactly where
@@ -129,7 +128,7 @@ class ClassicPlanner:
 
     def plan(self, observation: Observation) -> Plan:
         target = observation.detection
-        if observation.detections:
+        if target is None and observation.detections:
             target = select_target(observation.detections, parse_instruction(observation.instruction))
         offset = observation.offset_of(target)
         if offset is None:
