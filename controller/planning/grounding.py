@@ -108,15 +108,13 @@ class InstructionRefused(ValueError):
 
 def unknown_nouns(text: str, vocabulary: Vocabulary | None = None) -> list[str]:
     """The phrases of `text` that stand where a target's name would (after a determiner, past any
-    colour words) and that the vocabulary does not know: ["flux capacitor"] for "centre the flux
-    capacitor"; [] for "centre it" or "centre the red one"."""
+    colour words) and that name no known target: ["flux capacitor"] for "centre the flux capacitor";
+    [] for "centre it" or "centre the red one". A phrase made of words the vocabulary knows only as
+    parts of other phrases is unknown too ("the pressure indicator": "pressure" belongs to "pressure
+    gauge", "indicator" to "indicator dial"; neither names a target alone)."""
     vocabulary = vocabulary or shipped_vocabulary()
-    known = set(vocabulary.instruction_words)
-    for words in [
-        *(c.words for c in vocabulary.colours.values()),
-        *(k.words for k in vocabulary.kinds.values()),
-    ]:
-        known.update(w for phrase in words for w in phrase.split())
+    kind_pattern = _patterns(vocabulary)[0]
+    colour_words = {w for c in vocabulary.colours.values() for phrase in c.words for w in phrase.split()}
     words = normalise(text).split()
     found: list[str] = []
     i = 0
@@ -125,13 +123,13 @@ def unknown_nouns(text: str, vocabulary: Vocabulary | None = None) -> list[str]:
             i += 1
             continue
         j = i + 1
-        while j < len(words) and words[j] in known and words[j] not in vocabulary.instruction_words:
+        while j < len(words) and words[j] in colour_words:
             j += 1  # colour words between the determiner and the noun
         run: list[str] = []
-        while j < len(words) and words[j] not in known and words[j] not in DETERMINERS:
+        while j < len(words) and words[j] not in vocabulary.instruction_words and words[j] not in DETERMINERS:
             run.append(words[j])
             j += 1
-        if run:
+        if run and kind_pattern.search(" ".join(run)) is None:
             found.append(" ".join(run))
         i = max(j, i + 1)
     return found
