@@ -4,8 +4,12 @@
 instruction, or the 30 training paraphrases); "heldout" are the paraphrases never
 seen in training (the paper's vision + text generalisation); a FILE holds any
 instructions, one per line (`{target}` slots are filled with the target's name), or
-`kind: phrase` lines (each image gets a phrase written for its named target's kind).
-Each test image is paired with one instruction drawn by a seeded generator.
+`kind: phrase` lines (each image gets a phrase written for its named target's kind), or is an
+operator-words YAML file (`controller.evaluation.operator_words`: templates, words per kind and
+colour). Each test image is paired with one instruction drawn by a seeded generator.
+
+`flown` scores the same instructions a second time as the loop flies them: understood by the
+keyword parser and heard by the planner in its trained words (`operator_words.as_flown`).
 """
 
 from __future__ import annotations
@@ -19,7 +23,22 @@ from typing import Any
 import numpy as np
 import torch
 
+from controller.evaluation.operator_words import (
+    UNDERSTOOD,
+    Flown,
+    as_flown,
+    is_operator_words_file,
+    load_operator_words,
+    pair_operator_words,
+)
+from controller.evaluation.presence import (
+    Ask,
+    judge_presence,
+    presence_pairs,
+    presence_threshold,
+)
 from controller.planning.actions import NUM_ACTIONS, with_mirror
+from controller.planning.grounding import TargetQuery, planner_instruction
 from controller.planning.latent.checkpoint import LoadedCheckpoint, load_checkpoint
 from controller.planning.latent.errors import InstructionError
 from controller.planning.latent.model import LatentDynamicsModel
@@ -49,7 +68,11 @@ class EvalResult:
     by_kind_and_targets: dict[str, dict[str, float]] = field(default_factory=dict)
     """Rank-1 by the named target's kind and how many targets the image shows ("gauge/2"): {"n", "rank1"}."""
     presence: dict[str, float | int] | None = None
-    """`presence_eval.PresenceResult.summary()` for a checkpoint with a presence head."""
+    """`presence.PresenceResult.summary()` for a checkpoint with a presence head."""
+    correct: list[bool] = field(default_factory=list)
+    """Per image: the right action, from an instruction the loop understood (as flown)."""
+    parsed: dict[str, int] | None = None
+    """As flown: how many instructions the loop understood, refused and misread (`operator_words`)."""
 
     def summary(self) -> dict[str, Any]:
         keys = (
@@ -65,6 +88,8 @@ class EvalResult:
         out = {k: getattr(self, k) for k in keys}
         if self.presence is not None:
             out["presence"] = self.presence
+        if self.parsed is not None:
+            out["parsed"] = self.parsed
         return out
 
 
@@ -127,16 +152,22 @@ def predict_distances(
     return torch.cat(out)
 
 
-def score(distances: torch.Tensor, data: ImageSet, setting: str) -> EvalResult:
-    """Compare argmin-distance actions with the truth labels."""
+def score(
+    distances: torch.Tensor, data: ImageSet, setting: str, understood: Sequence[bool] | None = None
+) -> EvalResult:
+    """Compare argmin-distance actions with the truth labels; an image whose instruction the loop did
+    not understand (`understood` False: refused or misread, as flown) counts as wrong on every axis.
+    The confusion matrix is the model's own choices."""
     pred = distances.argmin(dim=1)
     true = data.labels
+    ok = torch.ones_like(true, dtype=torch.bool) if understood is None else torch.tensor(list(understood))
     confusion = torch.zeros(NUM_ACTIONS, NUM_ACTIONS, dtype=torch.long)
     confusion.index_put_((true, pred), torch.ones_like(true), accumulate=True)
+    correct = (pred == true) & ok
     return EvalResult(
-        rank1=float((pred == true).float().mean()),
-        x_accuracy=float((pred // 3 == true // 3).float().mean()),
-        z_accuracy=float((pred % 3 == true % 3).float().mean()),
+        rank1=float(correct.float().mean()),
+        x_accuracy=float(((pred // 3 == true // 3) & ok).float().mean()),
+        z_accuracy=float(((pred % 3 == true % 3) & ok).float().mean()),
         confusion=confusion.tolist(),
         n=len(data),
         instructions=setting,
@@ -144,6 +175,7 @@ def score(distances: torch.Tensor, data: ImageSet, setting: str) -> EvalResult:
         labels=true.tolist(),
         offsets_px=data.offsets.tolist(),
         ids=list(data.ids),
+        correct=correct.tolist(),
     )
 
 
@@ -156,11 +188,16 @@ def pair_described(
     return [describe(named_target_name(refs, False), templates, corpus, rng) for refs in targets]
 
 
-def pair_kind_phrases(kinds: Sequence[str], phrases: dict[str, list[str]], seed: int) -> list[str]:
+def pair_kind_phrases(
+    kinds: Sequence[str], phrases: dict[str, list[str]], seed: int, path: str = "the instruction file"
+) -> list[str]:
     """One phrase per image from a `kind: phrase` file, written for its named target's kind (seeded)."""
     missing = sorted(set(kinds) - set(phrases))
     if missing:
-        raise InstructionError(f"the instruction file has no phrase for {missing}")
+        raise InstructionError(
+            f"{path} has no phrase for kind {', '.join(map(repr, missing))}, which the test images name "
+            f"(it has {', '.join(phrases)}): add a line '{missing[0]}: <phrase>'"
+        )
     rng = np.random.default_rng(seed)
     return [fill(phrases[k][int(rng.integers(len(phrases[k])))], k) for k in kinds]
 
@@ -172,8 +209,12 @@ def instructions_for(ckpt: LoadedCheckpoint, data: ImageSet, setting: str, seed:
     paper's way hears each kind's plain name, as it was trained and as its numbers were taken."""
     train_meta = ckpt.meta.get("train", {})
     trained_with = str(train_meta.get("instructions", "varied"))
+    if setting not in ("train", "heldout") and is_operator_words_file(setting):
+        if not data.targets:
+            raise InstructionError(f"{setting}: operator words need a dataset that lists its targets")
+        return pair_operator_words(data.targets, load_operator_words(setting), seed)
     if setting not in ("train", "heldout") and is_kind_phrase_file(Path(setting)):
-        return pair_kind_phrases(data.kinds, read_kind_phrases(Path(setting)), seed)
+        return pair_kind_phrases(data.kinds, read_kind_phrases(Path(setting)), seed, setting)
     templates = instruction_templates(setting, trained_with)
     if train_meta.get("target_choice", "named") == "described" and data.targets:
         corpus = "heldout" if setting == "heldout" else ("fixed" if trained_with == "fixed" else "train")
@@ -183,8 +224,8 @@ def instructions_for(ckpt: LoadedCheckpoint, data: ImageSet, setting: str, seed:
 
 def _rank1_by(result: EvalResult, keys: Sequence[str]) -> dict[str, dict[str, float]]:
     groups: dict[str, list[bool]] = {}
-    for pred, true, key in zip(result.predictions, result.labels, keys, strict=True):
-        groups.setdefault(key, []).append(pred == true)
+    for correct, key in zip(result.correct, keys, strict=True):
+        groups.setdefault(key, []).append(correct)
     return {k: {"n": len(v), "rank1": sum(v) / len(v)} for k, v in sorted(groups.items())}
 
 
@@ -196,40 +237,22 @@ def _group_rank1(result: EvalResult, data: ImageSet) -> None:
     result.by_kind_and_targets = _rank1_by(result, kinds)
 
 
-def _words(ckpt: LoadedCheckpoint, setting: str) -> tuple[list[str], str]:
-    """The templates and synonym corpus a setting asks in (for pairs made up here, e.g. absent targets)."""
+def asker(ckpt: LoadedCheckpoint, setting: str) -> Ask:
+    """How `setting` asks for a target it makes up (absent targets, empty images): in its own words."""
+    if setting not in ("train", "heldout") and is_operator_words_file(setting):
+        return load_operator_words(setting).instruction
     trained_with = str(ckpt.meta.get("train", {}).get("instructions", "varied"))
     corpus = "heldout" if setting == "heldout" else ("fixed" if trained_with == "fixed" else "train")
     if setting not in ("train", "heldout") and is_kind_phrase_file(Path(setting)):
-        return builtin_templates("heldout"), "heldout"
-    return instruction_templates(setting, trained_with), corpus
+        templates, corpus = builtin_templates("heldout"), "heldout"
+    else:
+        templates = instruction_templates(setting, trained_with)
+    return lambda name, rng: describe(name, templates, corpus, rng)
 
 
-def _presence(
-    ckpt: LoadedCheckpoint,
-    data: ImageSet,
-    instructions: Sequence[str],
-    empty: ImageSet | None,
-    setting: str,
-    seed: int,
-) -> dict[str, float | int]:
-    from controller.evaluation.presence import (
-        absent_instructions,
-        empty_instructions,
-        judge_presence,
-        presence_probabilities,
-    )
-
-    templates, corpus = _words(ckpt, setting)
-    p_present = presence_probabilities(ckpt, data.images, instructions)
-    negatives = [
-        presence_probabilities(ckpt, data.images, absent_instructions(data, templates, corpus, seed + 1))
-    ]
-    if empty is not None and len(empty):
-        negatives.append(
-            presence_probabilities(ckpt, empty.images, empty_instructions(empty, templates, corpus, seed))
-        )
-    return judge_presence(p_present, np.concatenate(negatives)).summary()
+def flown_asker(name: TargetQuery, rng: np.random.Generator) -> str:
+    """What the planner hears in flight for a target asked for as `name`, whatever the words."""
+    return planner_instruction(name)
 
 
 def evaluate_loaded(
@@ -283,32 +306,41 @@ def evaluate_checkpoint_modes(
     epsilon_px: float | None = None,
     seed: int = 0,
     mirror_modes: Sequence[bool] = (False,),
+    flown: bool = False,
 ) -> list[EvalResult]:
-    """`evaluate_checkpoint` once per mirror mode, loading, encoding and judging presence only once
-    (presence is scored on each image alone, so every mode carries the same figures)."""
+    """`evaluate_checkpoint` once per mirror mode, loading and encoding only once; `flown`: then the
+    same instructions as flown (`operator_words.as_flown`), once per mirror mode again. Presence is
+    judged per result: on each image alone, or as the mean with its mirror image's as the planner does."""
     ckpt = load_checkpoint(model_dir)
     index = load_index(data_dir)
     eps = index.default_epsilon_px() if epsilon_px is None else epsilon_px
     data = load_images(index.split(split), ckpt.config.image_size, eps, desc=split)
     instructions = instructions_for(ckpt, data, setting, seed)
-    dist = predict_distances(ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, data.images, instructions)
-    mirrored = _mirror_image_distances(ckpt, data, instructions) if any(mirror_modes) else None
-    presence = None
-    if ckpt.model.presence is not None and data.targets:
-        empty_rows = index.split("empty") if split == "test" else []
-        empty = (
-            load_images(empty_rows, ckpt.config.image_size, eps, "empty", in_view_only=False)
-            if empty_rows
-            else None
-        )
-        presence = _presence(ckpt, data, instructions, empty, setting, seed)
+    empty = None
+    if ckpt.model.presence is not None and data.targets and split == "test" and index.split("empty"):
+        empty = load_images(index.split("empty"), ckpt.config.image_size, eps, "empty", in_view_only=False)
+    readings: list[tuple[str, Sequence[str], Ask, Flown | None]] = [
+        (setting, instructions, asker(ckpt, setting), None)
+    ]
+    if flown:
+        reading = as_flown(instructions, data.targets)
+        readings.append((f"{setting} as flown", reading.heard, flown_asker, reading))
     results = []
-    for mirror in mirror_modes:
-        result = score(
-            with_mirror(dist, mirrored) if mirror else dist, data, setting + ("+mirror" if mirror else "")
-        )
-        _group_rank1(result, data)
-        result.presence = presence
-        log.info("%s on %s/%s (%d images): rank-1 %.4f", model_dir, data_dir, split, result.n, result.rank1)
-        results.append(result)
+    for name, texts, ask, reading in readings:
+        dist = predict_distances(ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, data.images, texts)
+        mirrored = _mirror_image_distances(ckpt, data, texts) if any(mirror_modes) else None
+        understood = None if reading is None else [v == UNDERSTOOD for v in reading.verdicts]
+        for mirror in mirror_modes:
+            result = score(
+                with_mirror(dist, mirrored) if mirror else dist, data, name + ("+mirror" if mirror else ""),
+                understood,
+            )  # fmt: skip
+            _group_rank1(result, data)
+            result.parsed = None if reading is None else reading.counts()
+            if ckpt.model.presence is not None and data.targets:
+                pairs = presence_pairs(ckpt, data, texts, empty, ask, seed, mirror)
+                result.presence = judge_presence(*pairs, presence_threshold(ckpt.meta)).summary()
+            log.info("%s on %s/%s (%d images, %s): rank-1 %.4f", model_dir, data_dir, split, result.n,
+                     result.instructions, result.rank1)  # fmt: skip
+            results.append(result)
     return results

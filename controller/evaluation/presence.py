@@ -9,22 +9,27 @@ on pairs whose truth is known from the manifest:
   target in view) asked for its scene's named target.
 
 Reported: the area under the ROC curve (the chance that an absent pair scores lower than a
-present one), accuracy at p = 0.5, the share of present pairs called absent (a mission
-that would give up on a target in view) and of absent pairs called present.
+present one), and at the checkpoint's threshold (its config.json `planner.presence_threshold`,
+chosen on validation scenes by `choose_threshold`; 0.5 where it has none) the accuracy, the
+share of present pairs called absent (a mission that would give up on a target in view) and of
+absent pairs called present.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
 import torch
 
+from controller.planning.grounding import TargetQuery
 from controller.planning.latent.checkpoint import LoadedCheckpoint
 from controller.training.data import ImageSet, to_float
 from controller.training.pairs import absent_names, named_target_name
-from controller.training.phrasing import describe
+
+DEFAULT_THRESHOLD = 0.5
+"""p(in view) below which a checkpoint without a calibrated threshold calls the target absent."""
 
 
 @dataclass(frozen=True)
@@ -34,43 +39,84 @@ class PresenceResult:
     auroc: float
     accuracy: float
     false_absent_rate: float
-    """Present pairs with p < 0.5: the target was in view and the model said it was not."""
+    """Present pairs with p below the threshold: the target was in view and the model said it was not."""
     false_present_rate: float
     mean_absent_confidence: float
     """Mean 1 − p over the absent pairs."""
+    threshold: float = DEFAULT_THRESHOLD
+    """p below this calls the target absent (the rates above are at it)."""
 
     def summary(self) -> dict[str, float | int]:
         return asdict(self)
 
 
+Ask = Callable[[TargetQuery, np.random.Generator], str]
+"""How an evaluation asks for a target in words: a name and a seeded generator → an instruction."""
+
+
 @torch.inference_mode()
 def presence_probabilities(
-    ckpt: LoadedCheckpoint, images_u8: torch.Tensor, instructions: Sequence[str], batch: int = 128
+    ckpt: LoadedCheckpoint,
+    images_u8: torch.Tensor,
+    instructions: Sequence[str],
+    batch: int = 128,
+    mirror: bool = False,
 ) -> np.ndarray:
-    """(N,) p(asked-for target in view) for N images, each with its own instruction."""
+    """(N,) p(asked-for target in view) for N images, each with its own instruction; `mirror`: the mean
+    with the left-right mirror image's, as the planner gives it with mirror test-time augmentation."""
     model = ckpt.model.eval()
     out = []
     for i in range(0, len(images_u8), batch):
         text = model.encode_text(ckpt.tokenizer.batch(instructions[i : i + batch]))
-        z_s = model.fuse_state(model.encode_images(to_float(images_u8[i : i + batch]), text), text)
-        out.append(torch.sigmoid(model.presence_logits(z_s)))
+        x = to_float(images_u8[i : i + batch])
+        views = (x, x.flip(-1)) if mirror else (x,)
+        z_s = [model.fuse_state(model.encode_images(v, text), text) for v in views]
+        out.append(torch.stack([torch.sigmoid(model.presence_logits(z)) for z in z_s]).mean(dim=0))
     return torch.cat(out).numpy().astype(np.float64)
 
 
-def absent_instructions(data: ImageSet, templates: Sequence[str], corpus: str, seed: int) -> list[str]:
+def absent_instructions(data: ImageSet, ask: Ask, seed: int) -> list[str]:
     """One instruction per image asking for something its scene does not hold (seeded)."""
     rng = np.random.default_rng(seed)
     out = []
     for refs in data.targets:
         names = absent_names(refs)
-        out.append(describe(names[int(rng.integers(len(names)))], templates, corpus, rng))
+        out.append(ask(names[int(rng.integers(len(names)))], rng))
     return out
 
 
-def empty_instructions(data: ImageSet, templates: Sequence[str], corpus: str, seed: int) -> list[str]:
+def empty_instructions(data: ImageSet, ask: Ask, seed: int) -> list[str]:
     """One instruction per image asking for its scene's named target (which is out of view)."""
     rng = np.random.default_rng(seed)
-    return [describe(named_target_name(refs, False), templates, corpus, rng) for refs in data.targets]
+    return [ask(named_target_name(refs, False), rng) for refs in data.targets]
+
+
+def presence_pairs(
+    ckpt: LoadedCheckpoint,
+    data: ImageSet,
+    present: Sequence[str],
+    empty: ImageSet | None,
+    ask: Ask,
+    seed: int,
+    mirror: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """p(in view) of the present pairs (`data` asked in `present`) and of the absent ones: each image of
+    `data` asked for something its scene lacks, each `empty` image for its scene's named target."""
+    p_present = presence_probabilities(ckpt, data.images, present, mirror=mirror)
+    absent = [
+        presence_probabilities(ckpt, data.images, absent_instructions(data, ask, seed + 1), mirror=mirror)
+    ]
+    if empty is not None and len(empty):
+        texts = empty_instructions(empty, ask, seed)
+        absent.append(presence_probabilities(ckpt, empty.images, texts, mirror=mirror))
+    return p_present, np.concatenate(absent)
+
+
+def presence_threshold(meta: dict) -> float:
+    """The checkpoint's calibrated presence threshold (config.json `planner.presence_threshold`), else 0.5."""
+    planner = meta.get("planner") if isinstance(meta.get("planner"), dict) else {}
+    value = planner.get("presence_threshold")
+    return DEFAULT_THRESHOLD if value is None else float(value)
 
 
 def auroc(scores_pos: np.ndarray, scores_neg: np.ndarray) -> float:
@@ -88,15 +134,33 @@ def auroc(scores_pos: np.ndarray, scores_neg: np.ndarray) -> float:
     return float((ranks[:n_pos].sum() - n_pos * (n_pos + 1) / 2) / (n_pos * len(scores_neg)))
 
 
-def judge_presence(p_present: np.ndarray, p_absent: np.ndarray) -> PresenceResult:
-    correct = int((p_present >= 0.5).sum() + (p_absent < 0.5).sum())
+def judge_presence(
+    p_present: np.ndarray, p_absent: np.ndarray, threshold: float = DEFAULT_THRESHOLD
+) -> PresenceResult:
+    """The rates at `threshold`: p below it calls the target absent."""
+    correct = int((p_present >= threshold).sum() + (p_absent < threshold).sum())
     n = len(p_present) + len(p_absent)
     return PresenceResult(
         n_present=len(p_present),
         n_absent=len(p_absent),
         auroc=auroc(p_present, p_absent),
         accuracy=correct / max(1, n),
-        false_absent_rate=float((p_present < 0.5).mean()) if len(p_present) else float("nan"),
-        false_present_rate=float((p_absent >= 0.5).mean()) if len(p_absent) else float("nan"),
+        false_absent_rate=float((p_present < threshold).mean()) if len(p_present) else float("nan"),
+        false_present_rate=float((p_absent >= threshold).mean()) if len(p_absent) else float("nan"),
         mean_absent_confidence=float((1.0 - p_absent).mean()) if len(p_absent) else float("nan"),
+        threshold=threshold,
     )
+
+
+def choose_threshold(p_present: np.ndarray, p_absent: np.ndarray, max_false_absent: float) -> float:
+    """The highest threshold that calls at most `max_false_absent` of the present pairs absent (so the
+    most absent pairs absent for that budget), on validation pairs. A present pair is called absent
+    when its p lies below the threshold: the threshold is the present scores' quantile, nudged down
+    onto the midpoint to the next lower score."""
+    if not 0.0 <= max_false_absent < 1.0 or len(p_present) == 0:
+        raise ValueError("choose_threshold needs present pairs and a budget in [0, 1)")
+    scores = np.sort(np.asarray(p_present, dtype=np.float64))
+    allowed = int(np.floor(max_false_absent * len(scores)))  # present pairs that may fall below
+    if allowed == 0:
+        return float(scores[0] / 2.0)
+    return float((scores[allowed - 1] + scores[allowed]) / 2.0)

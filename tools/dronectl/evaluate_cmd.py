@@ -5,9 +5,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from controller.planning.actions import ALL_ACTIONS
+
+if TYPE_CHECKING:
+    from controller.evaluation.evaluate import EvalResult
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -19,7 +24,14 @@ def build_parser() -> argparse.ArgumentParser:
         default="train",
         help="train (training-style), heldout (never-seen paraphrases and synonyms) or a text FILE: "
         "one instruction per line ({target} filled with the target's name), or `kind: phrase` lines "
-        "(each test image gets a phrase of its named target's kind)",
+        "(each test image gets a phrase of its named target's kind), or an operator-words YAML file "
+        "(templates, words per kind and colour; docs/operator_words.yaml)",
+    )
+    p.add_argument(
+        "--as-flown",
+        action="store_true",
+        help="also score the same instructions as flown: each understood by the loop's parser and heard "
+        "by the planner in its trained words (refused or misread instructions count as failures)",
     )
     p.add_argument(
         "--split", default="test", choices=("test", "train", "goal"), help="dataset split to score"
@@ -48,33 +60,20 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
-    from controller.evaluation.evaluate import evaluate_checkpoint
+    from controller.evaluation.evaluate import evaluate_checkpoint_modes
+    from controller.planning.latent.errors import LatentError
+    from drone_inspect_core.dataset import DatasetError
 
-    result = evaluate_checkpoint(
-        args.model, args.data, args.instructions, args.split, args.epsilon_px, args.seed, args.mirror_tta
-    )
-    print(f"images: {result.n}   instructions: {result.instructions}")
-    print(f"rank-1 accuracy: {100 * result.rank1:.2f}%")
-    print(f"X accuracy: {100 * result.x_accuracy:.2f}%   Z accuracy: {100 * result.z_accuracy:.2f}%")
-    names = [a.name for a in ALL_ACTIONS]
-    print("confusion (rows: true, columns: predicted)")
-    print(" " * 12 + " ".join(f"{n:>11}" for n in names))
-    for name, row in zip(names, result.confusion, strict=True):
-        print(f"{name:>11} " + " ".join(f"{v:>11}" for v in row))
-    if len(result.by_targets_in_view) > 1:
-        parts = [
-            f"{k} in view: {100 * g['rank1']:.2f}% of {g['n']}" for k, g in result.by_targets_in_view.items()
-        ]
-        print("rank-1 by targets in view: " + ", ".join(parts))
-    if result.presence is not None:
-        pr = result.presence
-        print(
-            f"not in view: AUROC {pr['auroc']:.4f}, accuracy {100 * pr['accuracy']:.2f}% "
-            f"({pr['n_present']} present, {pr['n_absent']} absent pairs), "
-            f"present called absent {100 * pr['false_absent_rate']:.2f}%, "
-            f"absent called present {100 * pr['false_present_rate']:.2f}%, "
-            f"mean absent confidence {pr['mean_absent_confidence']:.3f}"
-        )
+    try:
+        results = evaluate_checkpoint_modes(
+            args.model, args.data, args.instructions, args.split, args.epsilon_px, args.seed,
+            (args.mirror_tta,), flown=args.as_flown,
+        )  # fmt: skip
+    except (LatentError, DatasetError) as exc:  # a bad checkpoint, dataset or instruction file
+        print(f"dronectl evaluate: {exc}", file=sys.stderr)
+        return 2
+    for result in results:
+        _print_result(result, detailed=result is results[0])
     if args.latency > 0:
         from controller.benchmarks.planner_latency import latency_on_dataset
 
@@ -88,5 +87,36 @@ def main(argv: list[str]) -> int:
         )
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result.__dict__, indent=1) + "\n")
+        payload = results[0].__dict__ if len(results) == 1 else {r.instructions: r.__dict__ for r in results}
+        args.json.write_text(json.dumps(payload, indent=1) + "\n")
     return 0
+
+
+def _print_result(result: EvalResult, detailed: bool) -> None:
+    """One result: rank-1, axes, (first result only) the confusion matrix, groups and presence."""
+    print(f"images: {result.n}   instructions: {result.instructions}")
+    if result.parsed is not None:
+        p = result.parsed
+        print(f"the loop understood {p['understood']}, refused {p['refused']} and misread {p['misread']}")
+    print(f"rank-1 accuracy: {100 * result.rank1:.2f}%")
+    print(f"X accuracy: {100 * result.x_accuracy:.2f}%   Z accuracy: {100 * result.z_accuracy:.2f}%")
+    if detailed:
+        names = [a.name for a in ALL_ACTIONS]
+        print("confusion (rows: true, columns: predicted)")
+        print(" " * 12 + " ".join(f"{n:>11}" for n in names))
+        for name, row in zip(names, result.confusion, strict=True):
+            print(f"{name:>11} " + " ".join(f"{v:>11}" for v in row))
+    if len(result.by_targets_in_view) > 1:
+        parts = [
+            f"{k} in view: {100 * g['rank1']:.2f}% of {g['n']}" for k, g in result.by_targets_in_view.items()
+        ]
+        print("rank-1 by targets in view: " + ", ".join(parts))
+    if result.presence is not None:
+        pr = result.presence
+        print(
+            f"not in view: AUROC {pr['auroc']:.4f}; at p < {pr['threshold']:.3f}: accuracy "
+            f"{100 * pr['accuracy']:.2f}% ({pr['n_present']} present, {pr['n_absent']} absent pairs), "
+            f"present called absent {100 * pr['false_absent_rate']:.2f}%, "
+            f"absent called present {100 * pr['false_present_rate']:.2f}%, "
+            f"mean absent confidence {pr['mean_absent_confidence']:.3f}"
+        )
