@@ -122,11 +122,12 @@ def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
 
 
 class ManifestWriter:
-    """Appends manifest rows, one flushed line each (context manager)."""
+    """Appends manifest rows, one flushed line each (context manager). `append`: go on after the rows an
+    earlier (interrupted) collection wrote, instead of starting the file."""
 
-    def __init__(self, out_dir: Path) -> None:
+    def __init__(self, out_dir: Path, append: bool = False) -> None:
         self.path = out_dir / MANIFEST
-        self._file: TextIO = self.path.open("w", encoding="utf-8")
+        self._file: TextIO = self.path.open("a" if append else "w", encoding="utf-8")
         self.rows_written = 0
 
     def write(self, rows: Iterable[dict[str, Any]]) -> None:

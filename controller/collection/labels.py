@@ -1,0 +1,147 @@
+"""A capture's label from two sources checked against each other: the image, and the pose geometry.
+
+- Pose: the goal image saw the target at its offset, `depth_m` away along the camera's axis; that is a
+  point in the vehicle's local frame, and the capture's pose (telemetry) projects it to an offset
+  (`perception.camera_model`). As good as the pose estimate: PX4's drifts tenths of a metre at low
+  altitude (SITL: ~10 px at 2 m), a rangefinder-less distance error scales the offset.
+- Image (primary, the label itself): the goal image's box tracked in the capture
+  (`perception.target_tracker`, template matching with scale), searched within `search_px` of where the
+  pose geometry puts it (a brick wall or a pipe matches the template almost as well far from the target;
+  the pose says where to look, the image says exactly where it is).
+
+A capture whose tracked offset is more than `agree_px` from the pose-derived one is flagged
+(`disagree`), as one where the target is not found (`not_found`) or found where the pose says it is out
+of view (`unexpected`); flagged captures stay on disk and out of training and scoring. The ε rule
+(`drone_inspect_core.centring`) makes the label from the offset later, at any ε.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from controller.collection.goal import GoalRecord
+from perception.camera_model import CameraModel, PoseNed
+from perception.target_tracker import TemplateTracker, TrackerConfig
+
+
+@dataclass(frozen=True)
+class Label:
+    """The label of one capture: where the target is (the image's, or the pose's for an empty view)."""
+
+    offset_px: tuple[float, float]
+    bbox_px: tuple[float, float, float, float] | None
+    in_view: bool
+    fully_in_view: bool
+    flagged: bool
+    reason: str | None
+    image_offset_px: tuple[float, float] | None
+    pose_offset_px: tuple[float, float] | None
+    disagreement_px: float | None
+    match_score: float | None
+    scale: float | None
+
+    def record(self, tolerance_px: float, depth_m: float, distance_source: str) -> dict[str, Any]:
+        """The manifest row's `label` field."""
+
+        def pair(value: tuple[float, float] | None) -> list[float] | None:
+            return None if value is None else [round(value[0], 3), round(value[1], 3)]
+
+        return {
+            "source": "image" if self.image_offset_px is not None else "pose",
+            "flagged": self.flagged,
+            "reason": self.reason,
+            "image_offset_px": pair(self.image_offset_px),
+            "pose_offset_px": pair(self.pose_offset_px),
+            "disagreement_px": None if self.disagreement_px is None else round(self.disagreement_px, 3),
+            "tolerance_px": round(tolerance_px, 3),
+            "match_score": None if self.match_score is None else round(self.match_score, 4),
+            "scale": None if self.scale is None else round(self.scale, 4),
+            "goal_depth_m": round(depth_m, 4),
+            "distance_source": distance_source,
+        }
+
+
+class LabelMaker:
+    """Labels captures relative to one goal (its image, box, pose and distance)."""
+
+    def __init__(
+        self,
+        camera: CameraModel,
+        goal: GoalRecord,
+        agree_px: float,
+        tracker: TrackerConfig | None = None,
+        search_factor: float = 1.6,
+    ) -> None:
+        if goal.image is None:
+            raise ValueError("LabelMaker needs the goal image")
+        self.camera, self.goal, self.agree_px = camera, goal, agree_px
+        self.search_px = search_factor * agree_px
+        self.tracker = TemplateTracker(goal.image, goal.box_px, tracker)
+        self._target = camera.point_ned(goal.pose, goal.offset_px, goal.depth_m)
+        u0, v0, u1, v1 = goal.box_px
+        self._half = ((u1 - u0) / 2.0, (v1 - v0) / 2.0)
+
+    def pose_offset(self, pose: PoseNed) -> tuple[float, float, float]:
+        """(du, dv, depth) where the pose geometry puts the target seen from `pose`."""
+        return self.camera.project_ned(pose, self._target)
+
+    def label(self, image: np.ndarray, pose: PoseNed) -> Label:
+        du, dv, depth = self.pose_offset(pose)
+        width, height = self.camera.width, self.camera.height
+        scale_hint = self.goal.depth_m / depth if depth > 0 else math.nan
+        expected_in_view = depth > 0 and abs(du) < width / 2.0 and abs(dv) < height / 2.0
+        pose_offset = (du, dv) if depth > 0 and math.isfinite(du) and math.isfinite(dv) else None
+        near = (du + width / 2.0, dv + height / 2.0) if expected_in_view else None
+        found = self.tracker.track(
+            image, near, self.search_px if near else None, scale_hint if near else None
+        )
+        if not expected_in_view:
+            # An empty view: the label is the pose's (out of view), checked by the image seeing nothing.
+            if found is not None and self.tracker.track(image) is not None:
+                return self._flagged("unexpected", pose_offset, found)
+            offset = pose_offset if pose_offset is not None else (0.0, 0.0)  # out of view: never trained on
+            return Label(offset, None, False, False, False, None, None, pose_offset, None, None, None)
+        if found is None:
+            return self._flagged("not_found", pose_offset, None)
+        image_offset = (found.centre_px[0] - width / 2.0, found.centre_px[1] - height / 2.0)
+        disagreement = math.hypot(image_offset[0] - du, image_offset[1] - dv)
+        u0, v0, u1, v1 = found.bbox_px
+        fully = u0 >= 0 and v0 >= 0 and u1 <= width and v1 <= height
+        flagged = disagreement > self.agree_px
+        return Label(
+            offset_px=image_offset,
+            bbox_px=found.bbox_px,
+            in_view=abs(image_offset[0]) < width / 2.0 and abs(image_offset[1]) < height / 2.0,
+            fully_in_view=fully,
+            flagged=flagged,
+            reason="disagree" if flagged else None,
+            image_offset_px=image_offset,
+            pose_offset_px=(du, dv),
+            disagreement_px=disagreement,
+            match_score=found.score,
+            scale=found.scale,
+        )
+
+    def _flagged(self, reason: str, pose_offset: tuple[float, float] | None, found: Any) -> Label:
+        width, height = self.camera.width, self.camera.height
+        image_offset = (
+            None if found is None else (found.centre_px[0] - width / 2.0, found.centre_px[1] - height / 2.0)
+        )
+        offset = image_offset or pose_offset or (0.0, 0.0)
+        return Label(
+            offset_px=offset,
+            bbox_px=None if found is None else found.bbox_px,
+            in_view=found is not None,
+            fully_in_view=False,
+            flagged=True,
+            reason=reason,
+            image_offset_px=image_offset,
+            pose_offset_px=pose_offset,
+            disagreement_px=None,
+            match_score=None if found is None else found.score,
+            scale=None if found is None else found.scale,
+        )
