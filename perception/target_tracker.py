@@ -42,9 +42,13 @@ class TrackerConfig:
     """Scales of the face relative to the goal image (0.6: 1.7x as far as the goal, 1.7: 0.6x)."""
     coarse_step: float = 0.04
     fine_step: float = 0.01
-    margin: float = 0.25
-    """The wall around the box kept in the template, as a fraction of the box's size on each side."""
-    min_score: float = 0.7
+    margin: float = 0.1
+    """The wall around the box kept in the template, as a fraction of the box's size on each side (more
+    wall matches better on flat faces, worse where the target stands off the wall: parallax)."""
+    blur_px: float = 1.0
+    """Gaussian blur (σ, pixels) of template and image: thin parts (a handwheel's spokes) and sensor noise
+    then correlate over a pixel of misplacement instead of not at all."""
+    min_score: float = 0.6
     min_template_px: int = 8
 
     def __post_init__(self) -> None:
@@ -64,7 +68,7 @@ class TemplateTracker:
 
     def __init__(self, goal_image: np.ndarray, goal_box: Box, config: TrackerConfig | None = None) -> None:
         self.config = config or TrackerConfig()
-        grey = _grey(goal_image)
+        grey = _grey(goal_image, self.config.blur_px)
         height, width = grey.shape[:2]
         u0, v0, u1, v1 = (float(x) for x in goal_box)
         if not (0 <= u0 < u1 <= width and 0 <= v0 < v1 <= height):
@@ -97,7 +101,7 @@ class TemplateTracker:
         pose geometry puts the target): a wall of repeated bricks or a pipe holds places that match the
         goal crop almost as well as the target does, far from it. `scale_hint`: the scale the pose
         geometry expects; the search then spans `scale_hint` / 1.25 .. × 1.25 inside `scale_range`."""
-        grey = _grey(image)
+        grey = _grey(image, self.config.blur_px)
         cfg = self.config
         lo, hi = cfg.scale_range
         if scale_hint is not None and math.isfinite(scale_hint) and scale_hint > 0:
@@ -174,10 +178,9 @@ class _Match:
     scale: tuple[float, float]
 
 
-def _grey(image: np.ndarray) -> np.ndarray:
-    if image.ndim == 3:
-        return cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY)
-    return np.ascontiguousarray(image)
+def _grey(image: np.ndarray, blur_px: float) -> np.ndarray:
+    grey = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY) if image.ndim == 3 else image
+    return cv2.GaussianBlur(grey, (0, 0), blur_px) if blur_px > 0 else np.ascontiguousarray(grey)
 
 
 def _parabola(left: float, middle: float, right: float) -> float:

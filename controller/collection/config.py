@@ -134,6 +134,16 @@ class FlownCollectConfig:
     progress: bool = True
 
     def __post_init__(self) -> None:
+        if not self.goal:
+            raise ValueError(
+                "--goal: say where the goal is: here, scene (a simulated vehicle) or a goal.json"
+            )
+        if not self.kind:
+            raise ValueError("--kind: name the target's kind (gauge, valve, switchbox)")
+        if self.out_dir is None or not str(self.out_dir):
+            raise ValueError(
+                "--out: give the dataset folder (new or empty; with --resume, the one to go on with)"
+            )
         if self.vehicle in SIMULATED:
             if self.camera not in (None, "sim"):
                 raise ValueError(

@@ -9,9 +9,14 @@
   pose geometry puts it (a brick wall or a pipe matches the template almost as well far from the target;
   the pose says where to look, the image says exactly where it is).
 
-A capture whose tracked offset is more than `agree_px` from the pose-derived one is flagged
-(`disagree`), as one where the target is not found (`not_found`) or found where the pose says it is out
-of view (`unexpected`); flagged captures stay on disk and out of training and scoring. The ε rule
+A pose estimate drifts slowly (PX4's height estimate wanders a decimetre over minutes) while a tracker
+fails suddenly (another place on the wall, a lost target). So the two are compared after the recent drift
+is taken out: `pose_bias_px` is the median of (image − pose) over the last `bias_window` accepted
+captures (zero at the goal, where both agree by construction), and a capture whose tracked offset is more
+than `agree_px` from pose + bias is flagged (`disagree`), as one where the target is not found
+(`not_found`) or found where the pose says it is out of view (`unexpected`). Flagged captures stay on disk
+and out of training and scoring, and never move the bias. The raw pose-derived offset is recorded too
+(`dronectl dataset check` scores it alone against a simulator's truth). The ε rule
 (`drone_inspect_core.centring`) makes the label from the offset later, at any ε.
 """
 
@@ -43,6 +48,7 @@ class Label:
     disagreement_px: float | None
     match_score: float | None
     scale: float | None
+    pose_bias_px: tuple[float, float] = (0.0, 0.0)
 
     def record(self, tolerance_px: float, depth_m: float, distance_source: str) -> dict[str, Any]:
         """The manifest row's `label` field."""
@@ -56,6 +62,7 @@ class Label:
             "reason": self.reason,
             "image_offset_px": pair(self.image_offset_px),
             "pose_offset_px": pair(self.pose_offset_px),
+            "pose_bias_px": pair(self.pose_bias_px),
             "disagreement_px": None if self.disagreement_px is None else round(self.disagreement_px, 3),
             "tolerance_px": round(tolerance_px, 3),
             "match_score": None if self.match_score is None else round(self.match_score, 4),
@@ -75,6 +82,8 @@ class LabelMaker:
         agree_px: float,
         tracker: TrackerConfig | None = None,
         search_factor: float = 1.6,
+        bias_window: int = 8,
+        unexpected_score: float = 0.8,
     ) -> None:
         if goal.image is None:
             raise ValueError("LabelMaker needs the goal image")
@@ -82,8 +91,23 @@ class LabelMaker:
         self.search_px = search_factor * agree_px
         self.tracker = TemplateTracker(goal.image, goal.box_px, tracker)
         self._target = camera.point_ned(goal.pose, goal.offset_px, goal.depth_m)
-        u0, v0, u1, v1 = goal.box_px
-        self._half = ((u1 - u0) / 2.0, (v1 - v0) / 2.0)
+        self.bias_window = bias_window
+        self.unexpected_score = unexpected_score
+        self._residuals: list[tuple[float, float]] = []
+
+    @property
+    def bias_px(self) -> tuple[float, float]:
+        """The pose estimate's recent drift in pixels: median (image − pose) of the last accepted captures."""
+        if not self._residuals:
+            return 0.0, 0.0
+        recent = np.array(self._residuals[-self.bias_window :])
+        return float(np.median(recent[:, 0])), float(np.median(recent[:, 1]))
+
+    def observe(self, image_offset_px: tuple[float, float], pose_offset_px: tuple[float, float]) -> None:
+        """An accepted pair of offsets (a capture, or the goal checked again on `--resume`)."""
+        self._residuals.append(
+            (image_offset_px[0] - pose_offset_px[0], image_offset_px[1] - pose_offset_px[1])
+        )
 
     def pose_offset(self, pose: PoseNed) -> tuple[float, float, float]:
         """(du, dv, depth) where the pose geometry puts the target seen from `pose`."""
@@ -95,23 +119,27 @@ class LabelMaker:
         scale_hint = self.goal.depth_m / depth if depth > 0 else math.nan
         expected_in_view = depth > 0 and abs(du) < width / 2.0 and abs(dv) < height / 2.0
         pose_offset = (du, dv) if depth > 0 and math.isfinite(du) and math.isfinite(dv) else None
-        near = (du + width / 2.0, dv + height / 2.0) if expected_in_view else None
-        found = self.tracker.track(
-            image, near, self.search_px if near else None, scale_hint if near else None
-        )
-        if not expected_in_view:
-            # An empty view: the label is the pose's (out of view), checked by the image seeing nothing.
-            if found is not None and self.tracker.track(image) is not None:
+        bias = self.bias_px
+        near = (du + bias[0] + width / 2.0, dv + bias[1] + height / 2.0) if expected_in_view else None
+        if near is None:
+            # An empty view: the label is the pose's (out of view), checked by the image showing nothing that
+            # matches the goal's face well (`unexpected_score`: a round sign half matches a gauge) at about
+            # the goal's scale (the wall is about as far) anywhere.
+            found = self.tracker.track(image, scale_hint=1.0)
+            if found is not None and found.score >= self.unexpected_score:
                 return self._flagged("unexpected", pose_offset, found)
             offset = pose_offset if pose_offset is not None else (0.0, 0.0)  # out of view: never trained on
             return Label(offset, None, False, False, False, None, None, pose_offset, None, None, None)
+        found = self.tracker.track(image, near, self.search_px, scale_hint)
         if found is None:
             return self._flagged("not_found", pose_offset, None)
         image_offset = (found.centre_px[0] - width / 2.0, found.centre_px[1] - height / 2.0)
-        disagreement = math.hypot(image_offset[0] - du, image_offset[1] - dv)
+        disagreement = math.hypot(image_offset[0] - du - bias[0], image_offset[1] - dv - bias[1])
         u0, v0, u1, v1 = found.bbox_px
         fully = u0 >= 0 and v0 >= 0 and u1 <= width and v1 <= height
         flagged = disagreement > self.agree_px
+        if not flagged:
+            self.observe(image_offset, (du, dv))
         return Label(
             offset_px=image_offset,
             bbox_px=found.bbox_px,
@@ -124,6 +152,7 @@ class LabelMaker:
             disagreement_px=disagreement,
             match_score=found.score,
             scale=found.scale,
+            pose_bias_px=bias,
         )
 
     def _flagged(self, reason: str, pose_offset: tuple[float, float] | None, found: Any) -> Label:
@@ -144,4 +173,5 @@ class LabelMaker:
             disagreement_px=None,
             match_score=None if found is None else found.score,
             scale=None if found is None else found.scale,
+            pose_bias_px=self.bias_px,
         )

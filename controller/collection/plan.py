@@ -92,7 +92,8 @@ class PlanSettings:
     goal_radius: float = 0.3
     band_margin: float = 0.3
     """Sector offsets keep this share of ε clear of the ε bands (flying errors move captures)."""
-    edge_px: float = 3.0
+    edge_px: float = 14.0
+    """Room between the face (with the tracker's margin) and the image's edge: the template must fit."""
 
 
 def plan_captures(camera: CameraModel, goal: GoalGeometry, settings: PlanSettings) -> list[PlannedCapture]:
@@ -160,7 +161,7 @@ def _sector_capture(
             if sign == 0:
                 offset.append(float(rng.uniform(-(eps - margin), eps - margin)))
                 continue
-            lo, hi = eps + margin, half_image - half_px * scale * 1.15 - settings.edge_px
+            lo, hi = eps + margin, half_image - half_px * scale * 1.2 - settings.edge_px
             if hi <= lo:
                 break
             offset.append(sign * float(rng.uniform(lo, hi)))

@@ -184,10 +184,10 @@ def collect_flown(
             safe.connect()
             vehicle0 = math.nan
             try:
-                goal = _reach_goal(safe, opened.camera, model, config, goal, sim, agree)
+                goal, seen_at_goal = _reach_goal(safe, opened.camera, model, config, goal, sim, agree)
                 if not config.resume:
                     save_goal(goal, model, dataset.root)
-                    plan = plan_captures(model, goal.geometry(), _plan_settings(config, epsilon))
+                    plan = plan_captures(model, goal.geometry(), _plan_settings(config, epsilon, model.width))
                     dataset.save_plan(plan)
                 else:
                     plan = dataset.load_plan()
@@ -197,6 +197,8 @@ def collect_flown(
                     _meta(config, model, epsilon, agree, dataset, goal, plan, tally, started, False)
                 )
                 labels = LabelMaker(model, goal, agree)
+                if seen_at_goal is not None:  # a goal flown to again: the pose estimate's drift since then
+                    labels.observe(seen_at_goal, labels.pose_offset(pose_of(safe.telemetry()))[:2])
                 vehicle0 = safe.time_s()
                 _fly_captures(safe, opened, sim, dataset, plan, labels, config, epsilon, tally, on_capture)
                 tally.vehicle_s = safe.time_s() - vehicle0
@@ -256,7 +258,7 @@ def _control(config: FlownCollectConfig) -> PoseControl:
     return PoseControl(max_speed_m_s=config.max_speed_m_s, max_vertical_m_s=min(0.4, config.max_speed_m_s))
 
 
-def _plan_settings(config: FlownCollectConfig, epsilon: float) -> PlanSettings:
+def _plan_settings(config: FlownCollectConfig, epsilon: float, width_px: int) -> PlanSettings:
     return PlanSettings(
         n_goal=config.n_goal,
         n_per_sector=config.n_per_sector,
@@ -279,14 +281,14 @@ def _reach_goal(
     goal: GoalRecord | None,
     sim: Any,
     agree_px: float,
-) -> GoalRecord:
-    """Fly to (or record) the goal; see `controller.collection.goal_flight`."""
+) -> tuple[GoalRecord, tuple[float, float] | None]:
+    """Fly to (or record) the goal; see `controller.collection.goal_flight`. Also where the target is seen
+    at a goal flown to again (FILE, --resume), None for a goal recorded now."""
     control = _control(config)
     if goal is not None:  # --goal FILE, or --resume
         climb_to(vehicle, goal.pose.down_m, {})
         fly_to(vehicle, goal.pose, control, config.settling)
-        verify_goal(vehicle, camera, model, goal, agree_px)
-        return goal
+        return goal, verify_goal(vehicle, camera, model, goal, agree_px)
     if config.goal == GOAL_SCENE:
         climb = sim.takeoff_climb_m()
         climb_to(vehicle, vehicle.telemetry().position_ned.down_m - climb, {})
@@ -297,7 +299,7 @@ def _reach_goal(
             centre_by_image(vehicle, camera, model, config, control)
     else:
         take_offboard_here(vehicle)
-    return record_goal(vehicle, camera, model, config)
+    return record_goal(vehicle, camera, model, config), None
 
 
 def _fly_captures(

@@ -48,7 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="camera intrinsics: width, height and hfov_deg or a matrix",
     )
-    p.add_argument("--kind", required=True, help="the target's kind (gauge, valve, switchbox)")
+    p.add_argument("--kind", default="", help="the target's kind (gauge, valve, switchbox)")
     p.add_argument(
         "--goal",
         required=True,
