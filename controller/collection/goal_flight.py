@@ -23,6 +23,7 @@ import statistics
 import time
 from typing import Any
 
+import cv2
 import numpy as np
 
 from controller.collection.config import FlownCollectConfig
@@ -41,6 +42,8 @@ log = logging.getLogger(__name__)
 SAMPLE_S = 0.6
 """How long the goal pose and the rangefinder are averaged over."""
 CENTRING_MOVES = 3
+DETECTOR_FRAMES = 3
+"""Frames the detector is tried on before the goal box must be given (`--goal-box`)."""
 
 
 class GoalError(RuntimeError):
@@ -103,7 +106,8 @@ def sample_goal_pose(vehicle: Vehicle) -> tuple[PoseNed, float | None]:
 
 
 def goal_box(config: FlownCollectConfig, image: np.ndarray) -> tuple[tuple[float, float, float, float], str]:
-    """The target's box in the goal image: the operator's, else the detector's for the kind."""
+    """The target's box in the goal image: the operator's, else the detector's for the kind. When the
+    detector finds none, the image is left as `goal_candidate.png` in the output folder to read a box off."""
     height, width = image.shape[:2]
     if config.goal_box_px is not None:
         x, y, w, h = config.goal_box_px
@@ -115,8 +119,10 @@ def goal_box(config: FlownCollectConfig, image: np.ndarray) -> tuple[tuple[float
     detector = _shipped_detector()
     detections = [d for d in detector.detect_all(image) if d.kind == config.kind]
     if not detections:
+        candidate = config.out_dir / "goal_candidate.png"
+        cv2.imwrite(str(candidate), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
         raise GoalError(
-            f"the detector found no {config.kind} in the goal image (it knows "
+            f"the detector found no {config.kind} in the goal image ({candidate}; it knows "
             f"{', '.join(detector.config.kinds)}): give the target's box with --goal-box x,y,w,h"
         )
     best = max(detections, key=lambda d: d.confidence)
@@ -131,16 +137,12 @@ def _shipped_detector() -> Any:
 
 
 def record_goal(
-    vehicle: Vehicle,
-    camera: Camera,
-    model: CameraModel,
-    config: FlownCollectConfig,
-    settle_timeout_ok: bool = True,
+    vehicle: Vehicle, camera: Camera, model: CameraModel, config: FlownCollectConfig
 ) -> GoalRecord:
     """Settle, then the goal pose, image, box and distance (`GoalError` naming what is missing)."""
     settled, _ = wait_settled(vehicle, config.settling)
-    if not settled and not settle_timeout_ok:
-        raise GoalError("the vehicle did not settle at the goal pose")
+    if not settled:
+        log.warning("not settled at the goal within %.0f s: recording it as it is", config.settling.timeout_s)
     pose, range_m = sample_goal_pose(vehicle)
     frame = fresh_frame(camera, time.monotonic())
     if (frame.width, frame.height) != (model.width, model.height):
@@ -148,7 +150,15 @@ def record_goal(
             f"the camera sends {frame.width}x{frame.height} px images, the camera model says "
             f"{model.width}x{model.height}: fix the camera file"
         )
-    box, box_source = goal_box(config, frame.image)
+    for attempt in range(1, DETECTOR_FRAMES + 1):
+        try:
+            box, box_source = goal_box(config, frame.image)
+            break
+        except GoalError:
+            if attempt == DETECTOR_FRAMES:
+                raise
+            log.info("no %s detected in the goal frame: trying the next frame", config.kind)
+            frame = fresh_frame(camera, time.monotonic())
     if config.distance_m is not None:
         depth, source = config.distance_m, "given"
     elif range_m is not None:

@@ -155,12 +155,14 @@ def goal_fence(config: FlownCollectConfig, yaw_deg: float) -> GeofenceBox:
     )
 
 
-def collect_flown(
-    config: FlownCollectConfig, on_capture: Callable[[dict[str, Any], Any], None] | None = None
-) -> FlownResult:
+OnCapture = Callable[[dict[str, Any], Any, Any], None]
+"""`on_capture(row, opened_vehicle, simulated_vehicle_or_None)`, after each capture is written."""
+
+
+def collect_flown(config: FlownCollectConfig, on_capture: OnCapture | None = None) -> FlownResult:
     """Fly the collection into `config.out_dir` (or go on with `--resume`); see the module docstring.
 
-    `on_capture(row, opened_vehicle)` is called after each capture is written (tests inject faults there).
+    `on_capture` is called after each capture is written (tests inject faults there).
     """
     model, goal = check_inputs(config)
     dataset = FlownDataset(config.out_dir, config.resume)
@@ -312,7 +314,7 @@ def _fly_captures(
     config: FlownCollectConfig,
     epsilon: float,
     tally: CollectionTally,
-    on_capture: Callable[[dict[str, Any], Any], None] | None,
+    on_capture: OnCapture | None,
 ) -> None:
     """Every planned capture not taken yet; one that does not settle is tried again at the end, once."""
     control = _control(config)
@@ -333,7 +335,7 @@ def _fly_captures(
                 bar.update(1)
                 bar.set_postfix(flagged=tally.flagged)
                 if on_capture is not None:
-                    on_capture(row, opened)
+                    on_capture(row, opened, sim)
             todo = retry
             if todo and attempt == 1:
                 log.warning("%d captures did not settle: trying them once more", len(todo))

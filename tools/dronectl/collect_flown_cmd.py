@@ -51,7 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--kind", default="", help="the target's kind (gauge, valve, switchbox)")
     p.add_argument(
         "--goal",
-        required=True,
+        default="",
         help="here, scene (simulated vehicles) or a goal.json of an earlier collection",
     )
     p.add_argument(
@@ -80,7 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--out",
         type=Path,
-        required=True,
+        default=None,
         help="the dataset folder: new or empty (with --resume: the one to go on with)",
     )
     p.add_argument(
