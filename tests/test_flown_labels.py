@@ -166,3 +166,20 @@ def test_a_camera_file_needs_its_intrinsics_and_is_named_when_it_cannot_be_read(
     (tmp_path / "broken.yaml").write_text("width: [640\n")
     with pytest.raises(CameraFileError, match=r"broken\.yaml: YAML syntax error"):
         load_camera_file(tmp_path / "broken.yaml")
+
+
+def test_a_pose_estimate_that_moved_for_good_becomes_the_bias_after_three_consistent_captures(
+    placed: Placed,
+) -> None:
+    """A wrong match disagrees differently from each pose; a moved estimate the same way in metres."""
+    goal, _ = _goal(placed)
+    maker = LabelMaker(CAMERA, goal, agree_px=0.1 * SIZE)
+    views = [(-0.3, 0.2, 2.1), (0.2, -0.1, 1.9), (0.4, 0.3, 2.2), (-0.1, -0.2, 2.0), (0.1, 0.1, 2.3)]
+    labels = []
+    for view in views:
+        image, truth, pose = placed.at(*view)
+        label = maker.label(image, pose.moved(0.0, 0.0, 0.28))  # the estimate 28 cm too high, all along
+        labels.append(label)
+        assert math.dist(label.offset_px, truth.offset_px) < 2.0, view  # the image's label stays right
+    assert [label.flagged for label in labels] == [True, True, True, False, False]
+    assert maker.reanchored == 1 and maker.bias_m[1] == pytest.approx(-0.28, abs=0.03)

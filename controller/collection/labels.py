@@ -9,19 +9,23 @@
   pose geometry puts it (a brick wall or a pipe matches the template almost as well far from the target;
   the pose says where to look, the image says exactly where it is).
 
-A pose estimate drifts slowly (PX4's height estimate wanders a decimetre over minutes) while a tracker
-fails suddenly (another place on the wall, a lost target). So the two are compared after the recent drift
-is taken out: `pose_bias_px` is the median of (image − pose) over the last `bias_window` accepted
-captures (zero at the goal, where both agree by construction), and a capture whose tracked offset is more
-than `agree_px` from pose + bias is flagged (`disagree`), as one where the target is not found
-(`not_found`) or found where the pose says it is out of view (`unexpected`). Flagged captures stay on disk
-and out of training and scoring, and never move the bias. The raw pose-derived offset is recorded too
-(`dronectl dataset check` scores it alone against a simulator's truth). The ε rule
+A pose estimate wanders (PX4 SITL's height estimate here: by up to 0.3 m, changing over tens of seconds
+as the baro and GPS drift and the vehicle climbs and descends) while a tracker fails suddenly (another
+place on the wall, a lost target). So the two are compared after the recent error is taken out: the bias is
+the mean of the pose estimate's error across the camera's axis, in metres, over the last `bias_window`
+accepted captures (zero at the goal, where both agree by construction), and a capture whose tracked offset
+is more than `agree_px` from the pose's prediction with it is flagged (`disagree`), as one where the target
+is not found (`not_found`) or found where the pose says it is out of view (`unexpected`). Flagged captures
+stay on disk and out of training and scoring, and never move the bias, unless `reanchor_after` of them in
+a row show the same error in metres from different poses: that is the estimate having moved (a wrong
+match does not look the same from elsewhere), and it becomes the bias. The raw pose-derived offset is
+recorded too (`dronectl dataset check` scores it alone against a simulator's truth). The ε rule
 (`drone_inspect_core.centring`) makes the label from the offset later, at any ε.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -31,6 +35,8 @@ import numpy as np
 from controller.collection.goal import GoalRecord
 from perception.camera_model import CameraModel, PoseNed
 from perception.target_tracker import TemplateTracker, TrackerConfig
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -82,7 +88,8 @@ class LabelMaker:
         agree_px: float,
         tracker: TrackerConfig | None = None,
         search_factor: float = 1.6,
-        bias_window: int = 8,
+        bias_window: int = 2,
+        reanchor_after: int = 3,
         unexpected_score: float = 0.8,
     ) -> None:
         if goal.image is None:
@@ -91,23 +98,54 @@ class LabelMaker:
         self.search_px = search_factor * agree_px
         self.tracker = TemplateTracker(goal.image, goal.box_px, tracker)
         self._target = camera.point_ned(goal.pose, goal.offset_px, goal.depth_m)
-        self.bias_window = bias_window
+        self.bias_window, self.reanchor_after = bias_window, reanchor_after
         self.unexpected_score = unexpected_score
-        self._residuals: list[tuple[float, float]] = []
+        self._accepted: list[tuple[float, float]] = []
+        self._disagreeing: list[tuple[float, float]] = []
+        self.reanchored = 0
 
     @property
-    def bias_px(self) -> tuple[float, float]:
-        """The pose estimate's recent drift in pixels: median (image − pose) of the last accepted captures."""
-        if not self._residuals:
+    def bias_m(self) -> tuple[float, float]:
+        """The pose estimate's recent error across the camera's axis (right, down; metres): the mean of
+        (image − pose) over the last `bias_window` accepted captures, turned into metres at their depth."""
+        if not self._accepted:
             return 0.0, 0.0
-        recent = np.array(self._residuals[-self.bias_window :])
-        return float(np.median(recent[:, 0])), float(np.median(recent[:, 1]))
+        recent = np.array(self._accepted[-self.bias_window :])
+        return float(recent[:, 0].mean()), float(recent[:, 1].mean())
 
-    def observe(self, image_offset_px: tuple[float, float], pose_offset_px: tuple[float, float]) -> None:
-        """An accepted pair of offsets (a capture, or the goal checked again on `--resume`)."""
-        self._residuals.append(
-            (image_offset_px[0] - pose_offset_px[0], image_offset_px[1] - pose_offset_px[1])
+    def _residual_m(
+        self, image_px: tuple[float, float], pose_px: tuple[float, float], depth_m: float
+    ) -> tuple[float, float]:
+        return (image_px[0] - pose_px[0]) * depth_m / self.camera.fx, (
+            image_px[1] - pose_px[1]
+        ) * depth_m / self.camera.fy
+
+    def observe(self, image_offset_px: tuple[float, float], pose: PoseNed) -> None:
+        """The target seen at `image_offset_px` from `pose` with its pose agreed (a capture, or the goal
+        flown to again on `--resume`): the pose estimate's error there."""
+        du, dv, depth = self.pose_offset(pose)
+        self._accepted.append(self._residual_m(image_offset_px, (du, dv), depth))
+        self._disagreeing.clear()
+
+    def _reanchor(self, residual_m: tuple[float, float], depth_m: float) -> None:
+        """A pose estimate that has moved for good (a wrong match would not give the same error in metres
+        at different poses): after `reanchor_after` disagreeing captures whose errors agree with each other,
+        they become the bias. Those captures stay flagged; the ones after are compared afresh."""
+        self._disagreeing.append(residual_m)
+        recent = np.array(self._disagreeing[-self.reanchor_after :])
+        if len(recent) < self.reanchor_after:
+            return
+        spread_px = (
+            float(np.max(np.linalg.norm(recent - recent.mean(axis=0), axis=1))) * self.camera.fx / depth_m
         )
+        if spread_px <= self.agree_px / 2.0:
+            log.warning(
+                "the pose estimate moved by %s m and stays there: comparing against that now",
+                recent.mean(axis=0).round(2),
+            )
+            self._accepted = [tuple(r) for r in recent.tolist()]  # type: ignore[misc]
+            self._disagreeing.clear()
+            self.reanchored += 1
 
     def pose_offset(self, pose: PoseNed) -> tuple[float, float, float]:
         """(du, dv, depth) where the pose geometry puts the target seen from `pose`."""
@@ -119,9 +157,7 @@ class LabelMaker:
         scale_hint = self.goal.depth_m / depth if depth > 0 else math.nan
         expected_in_view = depth > 0 and abs(du) < width / 2.0 and abs(dv) < height / 2.0
         pose_offset = (du, dv) if depth > 0 and math.isfinite(du) and math.isfinite(dv) else None
-        bias = self.bias_px
-        near = (du + bias[0] + width / 2.0, dv + bias[1] + height / 2.0) if expected_in_view else None
-        if near is None:
+        if not expected_in_view:
             # An empty view: the label is the pose's (out of view), checked by the image showing nothing that
             # matches the goal's face well (`unexpected_score`: a round sign half matches a gauge) at about
             # the goal's scale (the wall is about as far) anywhere.
@@ -130,16 +166,21 @@ class LabelMaker:
                 return self._flagged("unexpected", pose_offset, found)
             offset = pose_offset if pose_offset is not None else (0.0, 0.0)  # out of view: never trained on
             return Label(offset, None, False, False, False, None, None, pose_offset, None, None, None)
+        bias_m = self.bias_m
+        bias = (bias_m[0] * self.camera.fx / depth, bias_m[1] * self.camera.fy / depth)
+        near = (du + bias[0] + width / 2.0, dv + bias[1] + height / 2.0)
         found = self.tracker.track(image, near, self.search_px, scale_hint)
         if found is None:
-            return self._flagged("not_found", pose_offset, None)
+            return self._flagged("not_found", pose_offset, None, bias)
         image_offset = (found.centre_px[0] - width / 2.0, found.centre_px[1] - height / 2.0)
         disagreement = math.hypot(image_offset[0] - du - bias[0], image_offset[1] - dv - bias[1])
         u0, v0, u1, v1 = found.bbox_px
         fully = u0 >= 0 and v0 >= 0 and u1 <= width and v1 <= height
         flagged = disagreement > self.agree_px
-        if not flagged:
-            self.observe(image_offset, (du, dv))
+        if flagged:
+            self._reanchor(self._residual_m(image_offset, (du, dv), depth), depth)
+        else:
+            self.observe(image_offset, pose)
         return Label(
             offset_px=image_offset,
             bbox_px=found.bbox_px,
@@ -155,7 +196,13 @@ class LabelMaker:
             pose_bias_px=bias,
         )
 
-    def _flagged(self, reason: str, pose_offset: tuple[float, float] | None, found: Any) -> Label:
+    def _flagged(
+        self,
+        reason: str,
+        pose_offset: tuple[float, float] | None,
+        found: Any,
+        bias: tuple[float, float] = (0.0, 0.0),
+    ) -> Label:
         width, height = self.camera.width, self.camera.height
         image_offset = (
             None if found is None else (found.centre_px[0] - width / 2.0, found.centre_px[1] - height / 2.0)
@@ -173,5 +220,5 @@ class LabelMaker:
             disagreement_px=None,
             match_score=None if found is None else found.score,
             scale=None if found is None else found.scale,
-            pose_bias_px=self.bias_px,
+            pose_bias_px=bias,
         )

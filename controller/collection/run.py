@@ -200,7 +200,7 @@ def collect_flown(config: FlownCollectConfig, on_capture: OnCapture | None = Non
                 )
                 labels = LabelMaker(model, goal, agree)
                 if seen_at_goal is not None:  # a goal flown to again: the pose estimate's drift since then
-                    labels.observe(seen_at_goal, labels.pose_offset(pose_of(safe.telemetry()))[:2])
+                    labels.observe(seen_at_goal, pose_of(safe.telemetry()))
                 vehicle0 = safe.time_s()
                 _fly_captures(safe, opened, sim, dataset, plan, labels, config, epsilon, tally, on_capture)
                 tally.vehicle_s = safe.time_s() - vehicle0
