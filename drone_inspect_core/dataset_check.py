@@ -12,12 +12,14 @@ pose-derived offset, over the images kept for training (not flagged).
 from __future__ import annotations
 
 import logging
+import math
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import cv2
+import numpy as np
 from tqdm import tqdm
 
 from drone_inspect_core.centring import axis_signs, default_epsilon_px
@@ -31,20 +33,37 @@ TRAINING_SPLITS = ("goal", "train")
 
 @dataclass
 class Agreement:
-    """Of `n` images, how many have the same label (ε rule) from one source as from the truth."""
+    """Of `n` images, how many have the same label (ε rule) from one source as from the truth, and how far
+    the source's offset lies from the truth's (pixels)."""
 
     agree: int = 0
     n: int = 0
     disagreeing: list[str] = field(default_factory=list)
+    errors_px: list[float] = field(default_factory=list)
 
-    def add(self, row_id: str, same: bool) -> None:
+    def add(self, row_id: str, same: bool, error_px: float) -> None:
         self.n += 1
         self.agree += int(same)
+        self.errors_px.append(error_px)
         if not same:
             self.disagreeing.append(row_id)
 
+    def error_quantiles(self) -> dict[str, float] | None:
+        """Median, 95th percentile and largest distance from the truth's offset, pixels."""
+        if not self.errors_px:
+            return None
+        values = np.array([e for e in self.errors_px if math.isfinite(e)])
+        if not len(values):
+            return None
+        return {
+            "median_px": round(float(np.median(values)), 3),
+            "p95_px": round(float(np.percentile(values, 95)), 3),
+            "max_px": round(float(values.max()), 3),
+        }
+
     def as_dict(self) -> dict[str, Any]:
-        return {**Rate(self.agree, self.n).as_dict(), "disagreeing": self.disagreeing[:50]}
+        return {**Rate(self.agree, self.n).as_dict(), "offset_error": self.error_quantiles(),
+                "disagreeing": self.disagreeing[:50]}  # fmt: skip
 
 
 @dataclass
@@ -111,11 +130,25 @@ def _truth_agreement(rows: list[dict[str, Any]], epsilon_px: float) -> tuple[Agr
         if not isinstance(truth, dict) or is_flagged(row) or row["split"] not in TRAINING_SPLITS:
             continue
         wanted = _label_of(truth.get("offset_px"), bool(truth.get("in_view")), epsilon_px)
-        image.add(row["id"], _label_of(row["offset_px"], row["in_view"], epsilon_px) == wanted)
+        image.add(
+            row["id"],
+            _label_of(row["offset_px"], row["in_view"], epsilon_px) == wanted,
+            _distance(row["offset_px"], truth.get("offset_px")),
+        )
         pose_offset = row["label"].get("pose_offset_px")
         if pose_offset is not None:
-            pose.add(row["id"], _label_of(pose_offset, row["in_view"], epsilon_px) == wanted)
+            pose.add(
+                row["id"],
+                _label_of(pose_offset, row["in_view"], epsilon_px) == wanted,
+                _distance(pose_offset, truth.get("offset_px")),
+            )
     return image, pose
+
+
+def _distance(offset: Any, truth: Any) -> float:
+    if offset is None or truth is None or None in truth:
+        return math.nan
+    return math.dist((float(offset[0]), float(offset[1])), (float(truth[0]), float(truth[1])))
 
 
 def _image_problems(root: Path, rows: list[dict[str, Any]], width: int, height: int) -> list[str]:

@@ -29,7 +29,14 @@ def _counts(title: str, counts: dict[str, int], order: tuple[str, ...] = ()) -> 
 def _agreement(what: str, agreement: Agreement | None) -> str:
     if agreement is None or not agreement.n:
         return f"  {what}: no rows to compare"
-    return f"  {what}: {Rate(agreement.agree, agreement.n).describe()}"
+    line = f"  {what}: {Rate(agreement.agree, agreement.n).describe()}"
+    errors = agreement.error_quantiles()
+    if errors is not None:
+        line += (
+            f"; offset from the truth's: median {errors['median_px']:.2f} px, p95 {errors['p95_px']:.2f} px, "
+            f"max {errors['max_px']:.2f} px"
+        )
+    return line
 
 
 def report_lines(check: DatasetCheck) -> list[str]:
