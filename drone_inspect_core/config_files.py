@@ -79,12 +79,15 @@ def validate_mapping(
     source: str | Path,
     error: type[ConfigFileError],
     unnamed: Collection[str] = (),
+    context: dict[str, Any] | None = None,
 ) -> M:
-    """Validate a parsed mapping against `model`; an `error` names `source` and every bad field."""
+    """Validate a parsed mapping against `model`; an `error` names `source` and every bad field.
+
+    `context` reaches the model's validators (a file's folder, for paths relative to it)."""
     if not isinstance(data, dict):
         raise error(source, None, f"expected a mapping at the top level, got {type(data).__name__}")
     try:
-        return model.model_validate(data)
+        return model.model_validate(data, context=context)
     except ValidationError as exc:
         # One entry per field; an error on a list that only echoes one on its items is dropped.
         problems: list[tuple[str, str]] = []

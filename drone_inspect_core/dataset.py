@@ -41,7 +41,7 @@ from typing import Any, TextIO
 import cv2
 import numpy as np
 
-from drone_inspect_core.targets import colour_name
+from drone_inspect_core.vocabulary import colour_name
 
 logger = logging.getLogger(__name__)
 
@@ -77,7 +77,11 @@ _ROW_FIELDS: dict[str, type | tuple[type, ...]] = {
     "offset_m": dict,
     "scene": dict,
 }
-_TARGET_FIELDS: dict[str, type | tuple[type, ...]] = {"kind": str, "attribute": str, **_TRUTH_FIELDS}
+_TARGET_FIELDS: dict[str, type | tuple[type, ...]] = {
+    "kind": str,
+    "attribute": (str, type(None)),  # None: a target with no trim to name (a picture face)
+    **_TRUTH_FIELDS,
+}
 """Each entry of a row's optional `targets` list."""
 SIMULATOR_ROW_FIELDS = ("scene_seed", "visible_fraction", "depth_m", "offset_m", "scene")
 """Row fields only a simulator knows: required of a rendered dataset, optional in a flown one."""
@@ -178,7 +182,7 @@ def _check_targets(row: dict[str, Any], where: str) -> None:
         missing = sorted({"target_attribute", "named", "targets"} - set(present))
         raise DatasetError(f"{where}: field {missing[0]!r} missing beside {present}")
     targets, named = row["targets"], row["named"]
-    if not isinstance(row["target_attribute"], str):
+    if not isinstance(row["target_attribute"], str | None):
         raise DatasetError(f"{where}: field 'target_attribute' has the wrong type")
     if not isinstance(targets, list) or not targets:
         raise DatasetError(f"{where}: field 'targets' must be a non-empty list")

@@ -121,7 +121,8 @@ def fly_move(
 
 
 def open_vehicle(spec: str, seed: int = 0) -> Vehicle:
-    """`sim` → an in-process `PyBulletVehicle` (seeded); anything else is a MAVSDK connection URL.
+    """`sim` → an in-process `PyBulletVehicle` (seeded); anything else is a MAVLink connection URL, flown
+    with MAVSDK (PX4) or in GUIDED mode (ArduPilot) as its heartbeat says (`flight.autopilots`).
 
     Imports each backend only when asked, so that a real-vehicle run never loads PyBullet.
     """
@@ -129,6 +130,6 @@ def open_vehicle(spec: str, seed: int = 0) -> Vehicle:
         from flight.pybullet_backend import PyBulletVehicle
 
         return PyBulletVehicle.create(seed=seed)
-    from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+    from flight.autopilots import MavlinkVehicle
 
-    return MavsdkVehicle(MavsdkConfig(url=spec))
+    return MavlinkVehicle(spec)

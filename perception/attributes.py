@@ -1,7 +1,7 @@
 """Reading a detected target's attribute: the colour name of its trim, from the pixels of its box.
 
 The trim is a gauge's bezel ring, a valve's handwheel rim and spokes, a switch box's
-door frame (`drone_inspect_core.targets`). At 224 px a target is some 20–40 px across, so the trim is
+door frame (`drone_inspect_core.vocabulary`). At 224 px a target is some 20–40 px across, so the trim is
 only 1–3 px wide and most of its pixels are blends with what borders it (the wall, the
 dial, the door). A plain median of the band's pixels therefore reads the wall or the
 door (measured: 36 of 74 switch boxes right); instead each palette colour is tested as
@@ -29,10 +29,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from drone_inspect_core.targets import ATTRIBUTE_COLOURS
+from drone_inspect_core.vocabulary import shipped_vocabulary
 
-_NAMES: tuple[str, ...] = tuple(ATTRIBUTE_COLOURS)
-_PALETTE = np.array([ATTRIBUTE_COLOURS[n] for n in _NAMES], dtype=np.float32)  # (C, 3)
+_NAMES: tuple[str, ...] = shipped_vocabulary().colour_names
+_PALETTE = np.array([shipped_vocabulary().colours[n].rgb for n in _NAMES], dtype=np.float32)  # (C, 3)
 _SHADES = np.linspace(0.55, 1.1, 6, dtype=np.float32)
 _TRIM_SHARES = np.linspace(0.5, 1.0, 5, dtype=np.float32)
 _BANDS: dict[str, tuple[float, float]] = {
@@ -54,7 +54,7 @@ _MAX_CANDIDATES = 64  # trim candidates scored, evenly subsampled (a large box's
 def read_attribute(
     image: np.ndarray, bbox_px: tuple[float, float, float, float], kind: str | None
 ) -> str | None:
-    """The trim colour name (`drone_inspect_core.targets.ATTRIBUTE_COLOURS`) of the target in `bbox_px`,
+    """The trim colour name (`drone_inspect_core.vocabulary`) of the target in `bbox_px`,
     or None.
 
     `kind` picks the band (a switch box's frame, else a ring); None when the box is

@@ -20,8 +20,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from drone_inspect_core.vocabulary import shipped_vocabulary
+
 STRIDE = 4
-TARGET_KINDS: tuple[str, ...] = ("gauge", "valve", "switchbox")
 EDGE_SCALE_PX = 16.0  # edge distances are predicted as log(distance / EDGE_SCALE_PX)
 
 
@@ -32,7 +33,8 @@ class DetectorConfig:
     input_size: int = 224
     widths: tuple[int, int, int, int, int] = (16, 24, 48, 64, 96)  # channels at strides 2, 4, 8, 16, 32
     neck_width: int = 32
-    kinds: tuple[str, ...] = field(default=TARGET_KINDS)
+    kinds: tuple[str, ...] = field(default_factory=lambda: shipped_vocabulary().kind_names)
+    """The kinds the head has a heatmap for, in order (the shipped vocabulary's, or a fine-tune's)."""
     score_threshold: float = 0.5
 
     def __post_init__(self) -> None:

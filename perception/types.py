@@ -39,7 +39,7 @@ class Detection:
     controller centres), which under perspective need not be the middle of
     `bbox_px` = (u0, v0, u1, v1). `confidence` is in [0, 1]; `kind` is "gauge",
     "valve", "switchbox" or None when the detector does not classify; `attribute` is
-    the trim colour's name (`drone_inspect_core.targets.ATTRIBUTE_COLOURS`), None when not read.
+    the trim colour's name (`drone_inspect_core.vocabulary`), None when not read.
     """
 
     bbox_px: tuple[float, float, float, float]

@@ -127,7 +127,7 @@ BAD = [
     (["--kind", "gauge", "--out", "{out}"], "--goal: say where the goal is"),
     (["--kind", "gauge", "--goal", "scene", "--out", "{out}", "--box-m", "2"], "does not fit the geofence"),
     (["--kind", "gauge", "--goal", "scene", "--out", "{out}", "--distance-m", "0"], "--distance-m must be"),
-    (["--kind", "flange", "--goal", "scene", "--out", "{out}"], "--kind 'flange': unknown kind"),
+    (["--kind", "flange", "--goal", "scene", "--out", "{out}"], "--kind: unknown target kind 'flange'"),
     (
         ["--kind", "gauge", "--goal", "{tmp}/nowhere.json", "--out", "{out}"],
         "nowhere.json: no such goal file",

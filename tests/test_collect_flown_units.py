@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 from fake_vehicle import FakeVehicle
 
+from controller.collection.capture import CameraLostError, on_camera_loss, read_or_wait
 from controller.collection.config import FlownCollectConfig, Settling
 from controller.collection.goal import GoalRecord
 from controller.collection.pose_flight import PoseControl, fly_to, pose_of
-from controller.collection.run import CameraLostError, _on_camera_loss, _read_or_wait
 from flight.errors import FlightTimeoutError
 from flight.types import Telemetry
 from perception.camera import Camera
@@ -83,10 +83,10 @@ def test_a_lost_camera_holds_waits_then_returns_to_the_goal_and_holds_there(tmp_
     camera = DeadCamera()
     config = _config(tmp_path, "return")
     with pytest.raises(CameraLostError):
-        _read_or_wait(vehicle, camera, config)
+        read_or_wait(vehicle, camera, config)
     assert "hold" in vehicle.calls and camera.reads >= 2  # held, and kept asking for frames
     vehicle.calls.clear()
-    _on_camera_loss(vehicle, config, goal)
+    on_camera_loss(vehicle, config, goal)
     here = pose_of(vehicle.telemetry())
     assert math.dist(here.position, goal.pose.position) <= 0.06
     assert "stop_offboard" in vehicle.calls and "land" not in vehicle.calls
@@ -95,5 +95,5 @@ def test_a_lost_camera_holds_waits_then_returns_to_the_goal_and_holds_there(tmp_
 def test_a_lost_camera_lands_when_the_operator_chose_land(tmp_path: Path) -> None:
     vehicle = _hovering()
     goal = _goal_at(vehicle.telemetry())
-    _on_camera_loss(vehicle, _config(tmp_path, "land"), goal)
+    on_camera_loss(vehicle, _config(tmp_path, "land"), goal)
     assert "land" in vehicle.calls and not vehicle.telemetry().in_air

@@ -11,7 +11,7 @@ from controller.planning.grounding import (
     select_target,
 )
 from controller.training.instructions import CORPORA, builtin_templates, fill
-from drone_inspect_core.targets import TARGET_KINDS
+from drone_inspect_core.vocabulary import parse_kinds, shipped_vocabulary
 from perception.types import Detection
 
 
@@ -55,16 +55,20 @@ def test_words_inside_other_words_do_not_match() -> None:
 
 
 def test_every_builtin_training_and_heldout_instruction_parses_to_its_kind() -> None:
-    texts = [(fill(t, k), k) for corpus in CORPORA for t in builtin_templates(corpus) for k in TARGET_KINDS]
+    kinds = shipped_vocabulary().kind_names
+    texts = [(fill(t, k), k) for corpus in CORPORA for t in builtin_templates(corpus) for k in kinds]
     assert len(texts) > 100
     assert all(parse_instruction(text).kind == kind for text, kind in texts)
 
 
-def test_query_checks_its_names_and_describes_itself() -> None:
-    with pytest.raises(ValueError, match="kind"):
-        TargetQuery("pump", None)
-    with pytest.raises(ValueError, match="attribute"):
-        TargetQuery("gauge", "purple")
+def test_a_kind_of_its_own_is_parsed_in_its_own_words_only_where_it_is_known() -> None:
+    own = shipped_vocabulary().with_kinds(parse_kinds({"flange": {"words": ["pipe flange", "flange"]}}))
+    assert parse_instruction("centre the red pipe flange", own) == TargetQuery("flange", "red")
+    assert parse_instruction("centre the flange").kind is None  # the shipped words know no flange
+    assert parse_instruction("centre the manometer", own).kind == "gauge"  # the shipped words stay
+
+
+def test_query_describes_itself() -> None:
     assert TargetQuery("valve", "red").describe() == "red valve"
     assert TargetQuery(None, "red").describe() == "red target"
     assert TargetQuery().describe() == "any target"

@@ -104,13 +104,14 @@ def test_fuzz_random_datagrams_and_extreme_messages_never_stop_the_vehicle() -> 
         rng.shuffle(hostile)
         for i, data in enumerate(hostile):
             attacker.sendto(data, target)
-            if i % 200 == 0:
-                time.sleep(0.01)  # let the loop read: the socket buffer is the only thing that would drop
+            if i % 100 == 0:
+                time.sleep(0.02)  # let the loop read: the socket buffer is the only thing that would drop
         time.sleep(0.5)
         assert vehicle.running, "the vehicle loop ended"
         after = time.monotonic()
         client.send(M.MAVLink_param_request_read_message(sysid, 1, b"MIS_TAKEOFF_ALT", -1))
-        assert client.wait_for("PARAM_VALUE", 2.0, lambda m: m.param_id == "MIS_TAKEOFF_ALT", after=after)
+        # A loaded machine takes a while to work through thousands of messages: the answer may wait.
+        assert client.wait_for("PARAM_VALUE", 5.0, lambda m: m.param_id == "MIS_TAKEOFF_ALT", after=after)
         assert vehicle.stats().messages_in > 3000
     # close() re-raises a loop failure: leaving the block without one is the point.
 

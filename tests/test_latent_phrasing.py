@@ -10,30 +10,31 @@ from controller.planning.latent.errors import InstructionError
 from controller.training.data import TargetRef
 from controller.training.pairs import absent_names, target_name_for
 from controller.training.phrasing import (
-    SYNONYMS,
     TargetName,
     all_phrasings,
     describe,
     is_kind_phrase_file,
     read_kind_phrases,
 )
-from drone_inspect_core.targets import TARGET_KINDS
+from drone_inspect_core.vocabulary import shipped_vocabulary
+
+VOCABULARY = shipped_vocabulary()
 
 
 def test_held_out_synonyms_never_reach_the_training_text() -> None:
     text = " ".join(all_phrasings(["Center the {target}."], "train")).lower()
-    for kind in TARGET_KINDS:
-        assert not set(SYNONYMS["heldout"][kind]) & set(SYNONYMS["train"][kind])
-        for phrase in SYNONYMS["heldout"][kind]:
+    for kind in VOCABULARY.kinds.values():
+        assert not set(kind.heldout) & set(kind.train)
+        for phrase in kind.heldout:
             assert phrase not in text, phrase
 
 
 def test_describe_names_the_colour_only_when_asked() -> None:
     rng = np.random.default_rng(0)
     texts = {describe(TargetName("valve", "red"), ["go to the {target}"], "train", rng) for _ in range(30)}
-    assert texts == {f"go to the red {s}" for s in SYNONYMS["train"]["valve"]}
+    assert texts == {f"go to the red {s}" for s in VOCABULARY.kind("valve").train}
     plain = describe(TargetName("gauge"), ["centre the {target} now"], "heldout", rng)
-    assert plain.removeprefix("centre the ").removesuffix(" now") in SYNONYMS["heldout"]["gauge"]
+    assert plain.removeprefix("centre the ").removesuffix(" now") in VOCABULARY.kind("gauge").heldout
 
 
 def _ref(kind: str, colour: str, in_view: bool = True) -> TargetRef:

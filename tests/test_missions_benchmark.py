@@ -26,7 +26,7 @@ def test_every_planner_flies_the_same_scenes_and_skipped_seeds_are_replaced() ->
     again = benchmark_missions(config, "latent", frozenset({skipped}))
     assert skipped not in [m.scene.seed for m in again] and len(again) == 5
     assert latent[0].loop.scale_moves is True
-    fixed = BenchmarkConfig(n=1, seed=3, scale_moves=False)
+    fixed = BenchmarkConfig.of({"loop": {"scale_moves": False}}, n=1, seed=3)
     assert benchmark_missions(fixed, "random", frozenset())[0].loop.scale_moves is False
 
 

@@ -13,7 +13,7 @@ from controller.missions.schema import MissionFileError, load_mission, parse_mis
 from controller.missions.setup import scene_config_for
 from controller.planning.grounding import parse_instruction
 from controller.planning.loop_records import Outcome
-from drone_inspect_core.targets import colour_name
+from drone_inspect_core.vocabulary import colour_name
 from sim_world.scene.config import DEFAULT_SCENE
 from sim_world.scene.sampling import sample_scene
 
@@ -71,7 +71,7 @@ def test_a_centring_on_another_target_is_a_wrong_target_and_never_passes() -> No
 def test_multi_target_benchmark_missions_name_the_named_target_and_absent_ones_expect_not_found() -> None:
     today = benchmark_missions(BenchmarkConfig(n=3, seed=1), "classic", frozenset())
     assert all(m.instruction is None and m.targets == 1 for m in today)  # targets 1: today's missions
-    config = BenchmarkConfig(n=8, seed=1, targets=3, twins=True, absent=0.4)
+    config = BenchmarkConfig.of({"targets": 3, "twins": True}, n=8, seed=1, absent=0.4)
     missions = benchmark_missions(config, "classic", frozenset())
     assert missions == benchmark_missions(config, "classic", frozenset())  # the same for every run
     absent = [m for m in missions if "absent" in m.tags]
@@ -89,7 +89,7 @@ def test_multi_target_benchmark_missions_name_the_named_target_and_absent_ones_e
 
 @pytest.mark.timeout(180)
 def test_tiny_multi_target_benchmark_counts_wrong_targets_and_absent_missions() -> None:
-    config = BenchmarkConfig(n=3, seed=1, targets=3, planners=("classic", "oracle"), absent=0.34)
+    config = BenchmarkConfig.of({"targets": 3}, n=3, seed=1, planners=("classic", "oracle"), absent=0.34)
     summary = run_benchmark(config)
     for name in ("classic", "oracle"):
         p = summary["planners"][name]

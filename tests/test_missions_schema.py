@@ -28,7 +28,7 @@ def write(tmp_path: Path, text: str, name: str = "m.yaml") -> Path:
         ("name: x\nmax_steps: lots\n", "max_steps", "valid integer"),
         ("name: x\nplanner: llm\n", "planner", "'latent', 'classic', 'random' or 'oracle'"),
         ("name: x\nexpect: {centered: true}\n", "expect.centered", "unknown key"),
-        ("name: x\ntarget_kind: pump\n", "target_kind", "'gauge', 'valve' or 'switchbox'"),
+        ("name: x\ntarget_kind: pump\n", "target_kind", "known kinds: gauge, valve, switchbox"),
         ("name: x\nvehicle: 'mavlink:14540'\n", "vehicle", "'px4-sitl' nor a MAVLink URL"),
         ("name: x\nvehicle: udp://:14540\n", "camera", "a real vehicle needs a stream URL"),
         (

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from drone_inspect_core.targets import ATTRIBUTE_COLOURS, colour_name
+from drone_inspect_core.vocabulary import colour_name, shipped_vocabulary
 from perception.attributes import read_attribute
 from perception.detector_model import CentreNet, DetectorConfig
 from perception.image_detector import ImageDetector
@@ -82,7 +82,7 @@ def test_read_attribute_on_synthetic_trim() -> None:
     """A ring of each palette colour on a brick-red wall with a white dial; a frame on a grey wall."""
     yy, xx = np.mgrid[0:64, 0:64]
     r = np.hypot(xx + 0.5 - 32, yy + 0.5 - 32)
-    for name, rgb in ATTRIBUTE_COLOURS.items():
+    for name, rgb in ((c.name, c.rgb) for c in shipped_vocabulary().colours.values()):
         image = np.empty((64, 64, 3), np.uint8)
         image[:] = (150, 70, 50)
         image[r < 14] = rgb

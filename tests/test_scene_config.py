@@ -38,7 +38,7 @@ def test_a_partial_file_overrides_only_what_it_names(tmp_path: Path) -> None:
         ("target:\n  size_m: [0.5, 0.2]\n", "target.size_m", "min 0.5 > max 0.2"),
         ("target:\n  colour: red\n", "target.colour", "unknown key"),
         ("targets:\n  kinds: [gauge]\n", "targets", "unknown key"),
-        ("target:\n  kinds: [gauge, dial]\n", "target.kinds[1]", "'gauge', 'valve' or 'switchbox'"),
+        ("target:\n  kinds: [gauge, dial]\n", "target.kinds[1]", "known kinds: gauge, valve, switchbox"),
         ("target:\n  kinds: []\n", "target.kinds", "at least 1"),
         ("target:\n  dial_colours: ['#fff']\n", "target.dial_colours[0]", "#rrggbb"),
         ("wall:\n  north_m: far\n", "wall.north_m", "valid number"),
@@ -57,7 +57,7 @@ def test_a_partial_file_overrides_only_what_it_names(tmp_path: Path) -> None:
             "must differ in kind or bezel colour name",
         ),
         ("target:\n  count: [2, 2]\n  twins: true\n  bezel_colours: ['#c0392b']\n", "target.count", "twins"),
-        ("target:\n  other_kinds: [dial]\n", "target.other_kinds[0]", "'gauge', 'valve' or 'switchbox'"),
+        ("target:\n  other_kinds: [dial]\n", "target.other_kinds[0]", "known kinds: gauge, valve, switchbox"),
     ],
 )
 def test_invalid_field_is_named(tmp_path: Path, text: str, field: str, reason: str) -> None:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from drone_inspect_core.targets import colour_name
+from drone_inspect_core.vocabulary import colour_name
 from sim_world.rendering.camera import CameraConfig
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfig, load_scene_config, with_targets
 from sim_world.scene.sampling import rects_overlap, sample_scene, target_footprint

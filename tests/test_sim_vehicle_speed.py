@@ -53,7 +53,9 @@ def test_mission_sim_speed_goes_with_sim_mavlink_and_reaches_the_benchmark_missi
         parse_mission({**base, "vehicle": "sim", "sim_speed": 8})
     with pytest.raises(MissionFileError, match="sim_speed"):
         parse_mission({**base, "sim_speed": 0})
-    config = BenchmarkConfig(n=2, seed=1, planners=("latent",), vehicle="sim-mavlink", sim_speed=8.0)
+    config = BenchmarkConfig.of(
+        {"vehicle": "sim-mavlink", "sim_speed": 8.0}, n=2, seed=1, planners=("latent",)
+    )
     assert {m.sim_speed for m in benchmark_missions(config, "latent", frozenset())} == {8.0}
 
 

@@ -60,7 +60,8 @@ def run_fault_matrix(
     out = []
     for row in rows:
         log.info("fault matrix: %s", row.name)
-        summary = run_benchmark(replace(base, faults=row.faults, planners=(planner,)))
+        faulty = base.with_base(faults=row.faults) if row.faults else base
+        summary = run_benchmark(replace(faulty, planners=(planner,)))
         missions = summary["missions"]
         rows_ok = [m for m in missions if m["passed"]]
         offsets = [m["final_truth_error_px"] for m in missions if m["final_truth_error_px"] is not None]
@@ -92,7 +93,8 @@ def _how_it_ended(mission: dict[str, Any]) -> str:
 
 def _command(base: BenchmarkConfig, planner: str, row: FaultRow) -> str:
     parts = [
-        "dronectl benchmark-missions", f"--vehicle {base.vehicle}", f"--n {base.n}", f"--seed {base.seed}",
+        "dronectl benchmark-missions", f"--vehicle {base.base.vehicle}", f"--n {base.n}",
+        f"--seed {base.seed}",
         f"--planner {planner}", f"--parallel {base.parallel}",
     ]  # fmt: skip
     return " ".join(parts + ([row.options] if row.options else []))
@@ -131,7 +133,7 @@ def format_markdown(
     lines = [
         PAGE_HEAD.format(command=command).rstrip("\n"),
         "",
-        f"Vehicle `{base.vehicle}`, planner `{base.planners[0]}`, {base.n} randomised missions per row "
+        f"Vehicle `{base.base.vehicle}`, planner `{base.planners[0]}`, {base.n} randomised missions per row "
         f"(seed {base.seed}, unseen scenes), `--parallel {base.parallel}`, on a 2-core machine.",
         "",
         "| fault | command | missions | centred | worst final offset (px, truth) | longest run (s) "

@@ -18,84 +18,75 @@ today's missions exactly ("center the <kind>", resolved by the kit).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
 
-from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission, parse_mission
+from controller.missions.schema import SIMULATED_VEHICLES, Mission, parse_mission
+from controller.planning.planners import PLANNER_NAMES
 from controller.training.instructions import builtin_templates
 from controller.training.phrasing import TargetName, describe
-from drone_inspect_core.targets import ATTRIBUTE_COLOURS, TARGET_KINDS, colour_name
+from drone_inspect_core.vocabulary import Vocabulary, colour_name
 
 ABSENT_TAG = "absent"
 """The tag of a benchmark mission whose instruction names a target the scene does not hold."""
 CORPORA = ("train", "heldout")
 
 
+BASE_MISSION: dict[str, Any] = {"name": "benchmark", "tags": ["benchmark"]}
+"""The base mission of a benchmark given no other: today's in-process missions."""
+
+
 @dataclass(frozen=True)
 class BenchmarkConfig:
-    """What to fly. `vehicle`: `sim` (in-process), `sim-mavlink` (sim-vehicle + MAVSDK + MJPEG) or
-    `px4-sitl` (real PX4 SITL flying the world, lockstep, `px4_speed` "max" by default)."""
+    """A benchmark: a base mission that every mission copies (vehicle, planner checkpoint, detector, ε,
+    step budget, loop settings, targets, twins, kinds, scene family, faults, speeds, PX4), and what is
+    drawn per mission (the scene seed, the random start within these ranges, the instruction's phrase,
+    absent targets), for each planner. Build one with `BenchmarkConfig.of(mission_fields, ...)`."""
 
+    base: Mission = field(default_factory=lambda: parse_mission(BASE_MISSION))
     n: int = 200
     seed: int = 0
-    planners: tuple[str, ...] = ("latent", "classic", "random", "oracle")
-    vehicle: str = SIM
-    max_steps: int = 20
-    epsilon_px: float | None = None
+    planners: tuple[str, ...] = PLANNER_NAMES
     view_fraction: tuple[float, float] = (0.1, 0.85)
     distance_m: tuple[float, float] = (1.5, 3.0)
     yaw_deg: tuple[float, float] = (-10.0, 10.0)
-    checkpoint: str | None = None
-    detector: str = "image"
-    """`image` (what the product uses) or `truth` (in-process only: isolates the planners from detection)."""
-    detector_checkpoint: str | None = None
-    """The image detector's run folder; None: its shipped weights."""
-    scale_moves: bool = True
-    """The loop's move scheme: scaled with the detector's offset (default) or the paper's fixed lengths."""
-    second_choices: int | None = None
-    """The loop's `max_second_choices` (None: its default; 0: a "no move" far from centre is a stall)."""
-    targets: int = 1
-    """Targets in every scene, the named one included (1..4)."""
-    twins: bool = False
-    """One other target shares the named target's kind, in another trim colour (needs targets >= 2)."""
     instructions: str | None = None
     """The corpus ("train" / "heldout") of the phrases naming the target; None: "heldout" with several
     targets, twins or absent missions, else today's "center the <kind>"."""
     absent: float = 0.0
     """The fraction of missions whose instruction names a target the scene does not hold."""
     parallel: int = 1
-    px4_dir: str | None = None
-    """PX4 SITL build folder for `px4-sitl` (None: $PX4_SITL_DIR)."""
-    px4_speed: float | str = "max"
-    sim_speed: float | str = 1.0
-    """sim-mavlink: the sim-vehicle's speed, a factor or "max" (the missions' `sim_speed`)."""
-    faults: dict[str, Any] | None = None
-    """Injected faults, the `faults:` section of a mission file (seeded per mission by its scene seed)."""
     ray: str | None = None
     """Run the missions on Ray: "local" (a private local Ray of `parallel` CPUs) or a cluster's address."""
     rerun: bool = False
     """Record each mission as `mission.rrd` in its report folder (needs a report folder to keep)."""
 
+    @classmethod
+    def of(cls, mission: dict[str, Any] | None = None, **sampling: Any) -> BenchmarkConfig:
+        """A benchmark whose base mission is the default one with `mission`'s fields (validated as a
+        mission file is: a bad value is named)."""
+        base = parse_mission({**BASE_MISSION, **(mission or {})}, "the benchmark's base mission")
+        return cls(base=base, **sampling)
+
+    def with_base(self, **fields: Any) -> BenchmarkConfig:
+        """The same benchmark over a base mission with `fields` changed (validated)."""
+        data = {**self.base.model_dump(mode="json", exclude_unset=True), **fields}
+        return replace(self, base=parse_mission(data, "the benchmark's base mission"))
+
     def __post_init__(self) -> None:
         if self.n < 1 or self.parallel < 1:
             raise ValueError("n and parallel must be >= 1")
-        if self.vehicle not in (SIM, SIM_MAVLINK, PX4_SITL):
+        if self.base.vehicle not in SIMULATED_VEHICLES:
             raise ValueError(
-                f"vehicle must be {SIM!r}, {SIM_MAVLINK!r} or {PX4_SITL!r}, got {self.vehicle!r}"
+                f"vehicle must be one of {', '.join(SIMULATED_VEHICLES)}, got {self.base.vehicle!r}"
             )
-        unknown = set(self.planners) - {"latent", "classic", "random", "oracle"}
+        unknown = set(self.planners) - set(PLANNER_NAMES)
         if unknown or not self.planners:
-            raise ValueError(f"planners must be among latent, classic, random, oracle; got {self.planners}")
-        if not 1 <= self.targets <= 4:
-            raise ValueError(f"targets must be 1..4, got {self.targets}")
-        if self.twins and self.targets < 2:
-            raise ValueError("twins need targets >= 2 (the named one and its twin)")
+            raise ValueError(f"planners must be among {', '.join(PLANNER_NAMES)}; got {self.planners}")
         if self.instructions is not None and self.instructions not in CORPORA:
             raise ValueError(f"instructions must be one of {CORPORA}, got {self.instructions!r}")
-        if self.sim_speed != 1.0 and self.vehicle != SIM_MAVLINK:
-            raise ValueError(f"sim_speed goes with vehicle {SIM_MAVLINK!r} (px4-sitl: px4_speed)")
         if not 0.0 <= self.absent <= 1.0:
             raise ValueError(f"absent must be a fraction in [0, 1], got {self.absent:g}")
 
@@ -104,7 +95,12 @@ class BenchmarkConfig:
         """The phrases' corpus, None for today's resolved instruction (see `instructions`)."""
         if self.instructions is not None:
             return self.instructions
-        return "heldout" if self.targets > 1 or self.twins or self.absent > 0 else None
+        return "heldout" if self.base.targets > 1 or self.base.twins or self.absent > 0 else None
+
+    def as_json(self) -> dict[str, Any]:
+        """The configuration as JSON (the base mission as a mission file would hold it)."""
+        data = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "base"}
+        return {"base": self.base.model_dump(mode="json", exclude_unset=True), **data}
 
 
 def scene_seed(seed: int, index: int) -> int:
@@ -130,30 +126,21 @@ def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozen
         if seed in skip_seeds:
             continue
         absent = config.absent > 0 and float(_draw(seed, 2).random()) < config.absent
+        base = config.base
+        faults = base.faults.model_dump(mode="json", exclude_unset=True)
         data: dict[str, Any] = {
+            **base.model_dump(mode="json", exclude_unset=True),
             "name": f"bench-{config.seed}-{len(missions):04d}-{planner}",
-            "tags": ["benchmark", ABSENT_TAG] if absent else ["benchmark"],
-            "scene": {"seed": seed},
-            **({"targets": config.targets} if config.targets != 1 else {}),
-            **({"twins": True} if config.twins else {}),
+            "tags": [*base.tags, ABSENT_TAG] if absent else list(base.tags),
+            "scene": {**base.scene.model_dump(mode="json"), "seed": seed},
             "start": {"random": {
                 "seed": seed, "view_fraction": list(config.view_fraction),
                 "distance_m": list(config.distance_m), "yaw_deg": list(config.yaw_deg),
             }},
-            "vehicle": config.vehicle,
             "planner": planner,
-            "checkpoint": config.checkpoint,
-            "detector": config.detector,
-            "epsilon_px": config.epsilon_px,
-            "max_steps": config.max_steps,
-            "loop": {"scale_moves": config.scale_moves}
-            | ({} if config.second_choices is None else {"max_second_choices": config.second_choices}),
             "expect": {"outcome": "target_not_found"} if absent
-            else {"outcome": "centred", "max_steps": config.max_steps},
-            **({"sim_speed": config.sim_speed} if config.vehicle == SIM_MAVLINK else {}),
-            **({"px4": {"dir": config.px4_dir, "speed": config.px4_speed, "keep_ulog": False}}
-               if config.vehicle == PX4_SITL else {}),
-            **({"faults": {**config.faults, "seed": seed}} if config.faults else {}),
+            else {"outcome": "centred", "max_steps": base.max_steps},
+            **({"faults": {**faults, "seed": seed}} if base.faults.any else {}),
         }  # fmt: skip
         mission = parse_mission(data)
         if config.corpus is not None:
@@ -178,7 +165,7 @@ def instruction_for(mission: Mission, corpus: str, absent: bool) -> str:
     scene = sample_scene(scene_config_for(mission), seed)
     targets = [(t.kind, colour_name(t.bezel_colour)) for t in scene.targets]
     if absent:
-        name = _absent_name(targets, _draw(seed, 2), with_colour=mission.twins)
+        name = _absent_name(targets, _draw(seed, 2), with_colour=mission.twins, vocabulary=mission.vocabulary)
     else:
         kind, attribute = targets[0]
         repeats = mission.twins or any(k == kind for k, _ in targets[1:])
@@ -186,16 +173,19 @@ def instruction_for(mission: Mission, corpus: str, absent: bool) -> str:
     return describe(name, builtin_templates(corpus), corpus, _draw(seed, 1))
 
 
-def _absent_name(targets: list[tuple[str, str]], rng: np.random.Generator, with_colour: bool) -> TargetName:
+def _absent_name(
+    targets: list[tuple[str, str]], rng: np.random.Generator, with_colour: bool, vocabulary: Vocabulary
+) -> TargetName:
     """A kind no target has (by kind alone; with a colour too where `with_colour`: a twins mission's
     instruction always names one), else a kind with a colour no target of it has."""
     rng.random()  # the draw that chose "absent"
     kinds = {kind for kind, _ in targets}
-    missing = [k for k in TARGET_KINDS if k not in kinds]
+    missing = [k for k in vocabulary.kind_names if k not in kinds]
     if missing:
         kind = missing[int(rng.integers(len(missing)))]
-        colours = tuple(ATTRIBUTE_COLOURS)
+        colours = vocabulary.colour_names
         return TargetName(kind, colours[int(rng.integers(len(colours)))] if with_colour else None)
-    kind = TARGET_KINDS[int(rng.integers(len(TARGET_KINDS)))]
-    free = [c for c in ATTRIBUTE_COLOURS if (kind, c) not in targets]
+    kinds_known = vocabulary.kind_names
+    kind = kinds_known[int(rng.integers(len(kinds_known)))]
+    free = [c for c in vocabulary.colour_names if (kind, c) not in targets]
     return TargetName(kind, free[int(rng.integers(len(free)))])

@@ -30,7 +30,7 @@ from controller.benchmarks.mission_plan import ABSENT_TAG, BenchmarkConfig, benc
 from controller.missions.kits.base import LoadedModels
 from controller.missions.report import REPORT_JSON, claim_report_dir
 from controller.missions.results import MissionResult
-from controller.missions.schema import Mission
+from controller.missions.schema import Mission, parse_mission
 from controller.missions.suite import failed_to_start
 from drone_inspect_core.files import release_claim
 from drone_inspect_core.parallel import gather, task_executor
@@ -43,12 +43,13 @@ def _load_models(config: BenchmarkConfig) -> LoadedModels:
     from controller.planning.planners import LatentPlannerAdapter
     from perception.image_detector import ImageDetector
 
-    latent = LatentPlannerAdapter(config.checkpoint) if "latent" in config.planners else None
+    base = config.base
+    latent = LatentPlannerAdapter(base.checkpoint) if "latent" in config.planners else None
     detector = None
-    if config.detector == "image":
-        path = config.detector_checkpoint
+    if base.detector == "image":
+        path = base.detector_checkpoint
         detector = ImageDetector.shipped() if path is None else ImageDetector.load(path)
-    return LoadedModels(detector=detector, latent=latent, latent_checkpoint=config.checkpoint)
+    return LoadedModels(detector=detector, latent=latent, latent_checkpoint=base.checkpoint)
 
 
 MISSION_RRD = "mission.rrd"
@@ -172,23 +173,25 @@ def summarise(config: BenchmarkConfig, results: list[MissionResult], wall_s: flo
             },
         }
     summary = {
-        "config": {**config.__dict__, "planners": list(config.planners)},
+        "config": config.as_json(),
         "wall_s": round(wall_s, 1),
         "planners": planners,
         "missions": [r.to_json() for r in results],
     }
     summary["limits"] = limits_summary(results)
-    ready = [
-        r.vehicle_clock_s["ready_s"] - r.info["px4_clock_offset_s"]
-        for r in results
-        if "ready_s" in r.vehicle_clock_s and "px4_clock_offset_s" in r.info
-    ]
-    if ready:  # PX4 SITL: simulated seconds from the bridge's start to the estimator seen ready by MAVSDK
-        summary["px4_ready_sim_s"] = {
-            "mean": round(statistics.fmean(ready), 2),
-            "max": round(max(ready), 2),
-            "n": len(ready),
-        }
+    for autopilot in ("px4", "ardupilot"):
+        offset = f"{autopilot}_clock_offset_s"
+        ready = [
+            r.vehicle_clock_s["ready_s"] - r.info[offset]
+            for r in results
+            if "ready_s" in r.vehicle_clock_s and offset in r.info
+        ]
+        if ready:  # SITL: simulated seconds from the bridge's start to the estimator seen ready by the client
+            summary[f"{autopilot}_ready_sim_s"] = {
+                "mean": round(statistics.fmean(ready), 2),
+                "max": round(max(ready), 2),
+                "n": len(ready),
+            }
     return summary
 
 
@@ -242,27 +245,32 @@ def format_summary(summary: dict[str, Any]) -> str:
         return "-" if value is None else format(value, fmt)
 
     cfg = summary["config"]
+    base = parse_mission(cfg["base"], "the benchmark's base mission")
+    second_choices_set = "max_second_choices" in cfg["base"].get("loop", {})
     lines = [
-        f"{cfg['n']} missions per planner, seed {cfg['seed']}, vehicle {cfg['vehicle']}, "
-        f"budget {cfg['max_steps']} steps, {'scaled' if cfg.get('scale_moves', True) else 'fixed'} moves, "
-        + ("" if cfg.get("second_choices") is None else f"at most {cfg['second_choices']} second choices, ")
+        f"{cfg['n']} missions per planner, seed {cfg['seed']}, vehicle {base.vehicle}, "
+        f"budget {base.max_steps} steps, {'scaled' if base.loop.scale_moves else 'fixed'} moves, "
+        + (f"at most {base.loop.max_second_choices} second choices, " if second_choices_set else "")
         + f"{summary['wall_s']:.0f} s",
     ]
-    if cfg.get("targets", 1) > 1 or cfg.get("twins") or cfg.get("absent"):
+    if base.targets > 1 or base.twins or cfg.get("absent"):
         corpus = cfg.get("instructions") or "heldout"
         lines.append(
-            f"{cfg.get('targets', 1)} targets per scene{', with a twin' if cfg.get('twins') else ''}; "
+            f"{base.targets} targets per scene{', with a twin' if base.twins else ''}; "
             f"instructions from the {corpus} phrases; "
             f"{100 * cfg.get('absent', 0.0):.0f}% name an absent target"
         )
-    if "px4_ready_sim_s" in summary:
-        r = summary["px4_ready_sim_s"]
-        lines.append(
-            f"PX4 estimator ready (as seen by MAVSDK) {r['mean']:.1f} s simulated on average, "
-            f"{r['max']:.1f} s at most ({r['n']} missions)"
-        )
-    if cfg.get("faults"):
-        lines.append(f"injected faults: {cfg['faults']}")
+    for key, who in (
+        ("px4_ready_sim_s", "PX4 estimator ready (as seen by MAVSDK)"),
+        ("ardupilot_ready_sim_s", "ArduPilot's EKF ready (as seen by the GUIDED backend)"),
+    ):
+        if key in summary:
+            r = summary[key]
+            lines.append(
+                f"{who} {r['mean']:.1f} s simulated on average, {r['max']:.1f} s at most ({r['n']} missions)"
+            )
+    if base.faults.any:
+        lines.append(f"injected faults: {base.faults.model_dump(mode='json', exclude_unset=True)}")
     limits = summary.get("limits")
     if limits and limits["judged_by_truth"]:
         n = {key: len(limits[key]) for key in ("over_speed_limit", "outside_geofence", "over_timeout")}

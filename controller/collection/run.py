@@ -16,45 +16,48 @@ every capture taken is on disk with its row, `dataset.json` says the collection 
 from __future__ import annotations
 
 import contextlib
-import datetime as dt
 import logging
 import math
 import time
 from collections import Counter
-from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
+from controller.collection.capture import (
+    CameraLostError,
+    CollectionTally,
+    OnCapture,
+    control_for,
+    fly_captures,
+    now_iso,
+    on_camera_loss,
+)
 from controller.collection.config import GOAL_HERE, GOAL_SCENE, FlownCollectConfig
 from controller.collection.contact_sheet import write_contact_sheet
 from controller.collection.goal import GoalRecord, load_goal, save_goal
 from controller.collection.goal_flight import (
     centre_by_image,
     climb_to,
-    fresh_frame,
     record_goal,
     take_offboard_here,
     verify_goal,
 )
 from controller.collection.labels import LabelMaker
 from controller.collection.plan import PlannedCapture, PlanSettings, plan_captures
-from controller.collection.pose_flight import PoseControl, fly_to, pose_of
+from controller.collection.pose_flight import fly_to, pose_of
 from controller.collection.vehicles import SIM_CAMERA_OFFSET_FRD_M, open_collection_vehicle
 from controller.collection.writer import FlownDataset
-from drone_inspect_core.centring import default_epsilon_px, sector_of_offset
+from drone_inspect_core.centring import default_epsilon_px
 from drone_inspect_core.dataset import FLOWN, is_flagged
-from drone_inspect_core.targets import TARGET_KINDS
-from flight.errors import FlightError, FlightTimeoutError
+from drone_inspect_core.vocabulary import UnknownKindError, shipped_vocabulary
+from flight.errors import FlightError
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import GeofenceBox, SafetyLimits, safe_stop
 from flight.signals import StopRequested
 from flight.vehicle import Vehicle
 from perception.camera import Camera
 from perception.camera_model import CameraModel, load_camera_file
-from perception.errors import CameraError
 
 log = logging.getLogger(__name__)
 
@@ -62,31 +65,8 @@ FORMAT = "dronectl.flown/1"
 SIM_IMAGE_PX, SIM_HFOV_DEG = 224, 60.0
 
 
-class CameraLostError(RuntimeError):
-    """The camera sent nothing for `loss_wait_s`: the collection stopped (the vehicle landed or returned)."""
-
-
 class CollectionInputError(ValueError):
     """Bad input found before anything flies (a kind, a file, a folder); one line naming it."""
-
-
-@dataclass
-class CollectionTally:
-    """What this flight did, for the summary and `dataset.json`'s `flights`."""
-
-    taken: int = 0
-    flagged: int = 0
-    skipped: list[str] = field(default_factory=list)
-    wall_s: float = 0.0
-    vehicle_s: float = 0.0
-    ended_by: str = "running"
-
-    def rates(self) -> dict[str, float | None]:
-        per = self.taken * 60.0
-        return {
-            "images_per_wall_min": round(per / self.wall_s, 2) if self.wall_s > 0 else None,
-            "images_per_vehicle_min": round(per / self.vehicle_s, 2) if self.vehicle_s > 0 else None,
-        }
 
 
 @dataclass(frozen=True)
@@ -115,10 +95,15 @@ def camera_model_for(config: FlownCollectConfig) -> CameraModel:
 
 def check_inputs(config: FlownCollectConfig) -> tuple[CameraModel, GoalRecord | None]:
     """Everything that can be checked before connecting: the kind, the camera file, the goal file."""
-    if config.kind not in TARGET_KINDS:
-        raise CollectionInputError(
-            f"--kind {config.kind!r}: unknown kind; known kinds: {', '.join(TARGET_KINDS)}"
-        )
+    vocabulary = shipped_vocabulary()
+    if config.simulated and config.sim.scene_file is not None:
+        from sim_world.scene.config import load_scene_config  # a simulated world's kinds: its scene's too
+
+        vocabulary = load_scene_config(config.sim.scene_file).vocabulary
+    try:
+        vocabulary.kind(config.kind)
+    except UnknownKindError as exc:
+        raise CollectionInputError(f"--kind: {exc}") from None
     model = camera_model_for(config)
     goal = None
     if config.goal not in (GOAL_HERE, GOAL_SCENE) and not config.resume:
@@ -155,10 +140,6 @@ def goal_fence(config: FlownCollectConfig, yaw_deg: float) -> GeofenceBox:
     )
 
 
-OnCapture = Callable[[dict[str, Any], Any, Any], None]
-"""`on_capture(row, opened_vehicle, simulated_vehicle_or_None)`, after each capture is written."""
-
-
 def collect_flown(config: FlownCollectConfig, on_capture: OnCapture | None = None) -> FlownResult:
     """Fly the collection into `config.out_dir` (or go on with `--resume`); see the module docstring.
 
@@ -173,7 +154,7 @@ def collect_flown(config: FlownCollectConfig, on_capture: OnCapture | None = Non
     epsilon = config.epsilon_px or default_epsilon_px(model.width)
     agree = config.agree_px or 0.1 * model.width
     tally = CollectionTally()
-    started = _now()
+    started = now_iso()
     wall0 = time.perf_counter()
     complete = False
     plan: list[PlannedCapture] = []
@@ -202,17 +183,17 @@ def collect_flown(config: FlownCollectConfig, on_capture: OnCapture | None = Non
                 if seen_at_goal is not None:  # a goal flown to again: the pose estimate's drift since then
                     labels.observe(seen_at_goal, pose_of(safe.telemetry()))
                 vehicle0 = safe.time_s()
-                _fly_captures(safe, opened, sim, dataset, plan, labels, config, epsilon, tally, on_capture)
+                fly_captures(safe, opened, sim, dataset, plan, labels, config, epsilon, tally, on_capture)
                 tally.vehicle_s = safe.time_s() - vehicle0
                 complete = all(c.id in dataset.taken or c.id in tally.skipped for c in plan)
-                fly_to(safe, goal.pose, _control(config), config.settling)
+                fly_to(safe, goal.pose, control_for(config), config.settling)
                 safe.stop_offboard()
                 safe.land()
                 safe.disarm()
                 tally.ended_by = "complete" if complete else "captures skipped"
             except CameraLostError as exc:
                 tally.ended_by = f"camera lost: {exc}"
-                _on_camera_loss(safe, config, goal)
+                on_camera_loss(safe, config, goal)
                 raise
             except (Exception, KeyboardInterrupt) as exc:
                 tally.ended_by = _why(exc)
@@ -246,18 +227,10 @@ def _why(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}"
 
 
-def _now() -> str:
-    return dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
-
-
 def _position(goal: GoalRecord) -> Any:
     from flight.types import PositionNed
 
     return PositionNed(goal.pose.north_m, goal.pose.east_m, goal.pose.down_m)
-
-
-def _control(config: FlownCollectConfig) -> PoseControl:
-    return PoseControl(max_speed_m_s=config.max_speed_m_s, max_vertical_m_s=min(0.4, config.max_speed_m_s))
 
 
 def _plan_settings(config: FlownCollectConfig, epsilon: float, width_px: int) -> PlanSettings:
@@ -286,7 +259,7 @@ def _reach_goal(
 ) -> tuple[GoalRecord, tuple[float, float] | None]:
     """Fly to (or record) the goal; see `controller.collection.goal_flight`. Also where the target is seen
     at a goal flown to again (FILE, --resume), None for a goal recorded now."""
-    control = _control(config)
+    control = control_for(config)
     if goal is not None:  # --goal FILE, or --resume
         climb_to(vehicle, goal.pose.down_m, {})
         fly_to(vehicle, goal.pose, control, config.settling)
@@ -302,153 +275,6 @@ def _reach_goal(
     else:
         take_offboard_here(vehicle)
     return record_goal(vehicle, camera, model, config), None
-
-
-def _fly_captures(
-    vehicle: Vehicle,
-    opened: Any,
-    sim: Any,
-    dataset: FlownDataset,
-    plan: list[PlannedCapture],
-    labels: LabelMaker,
-    config: FlownCollectConfig,
-    epsilon: float,
-    tally: CollectionTally,
-    on_capture: OnCapture | None,
-) -> None:
-    """Every planned capture not taken yet; one that does not settle is tried again at the end, once."""
-    control = _control(config)
-    todo = [c for c in plan if c.id not in dataset.taken]
-    bar = tqdm(total=len(todo), unit="img", desc="collect (flown)", disable=not config.progress)
-    try:
-        for attempt in (1, 2):
-            retry = []
-            for capture in todo:
-                row = _capture(
-                    vehicle, opened.camera, sim, capture, labels, config, control, epsilon, dataset
-                )
-                if row is None:
-                    retry.append(capture)
-                    continue
-                tally.taken += 1
-                tally.flagged += int(is_flagged(row))
-                bar.update(1)
-                bar.set_postfix(flagged=tally.flagged)
-                if on_capture is not None:
-                    on_capture(row, opened, sim)
-            todo = retry
-            if todo and attempt == 1:
-                log.warning("%d captures did not settle: trying them once more", len(todo))
-        tally.skipped = [c.id for c in todo]
-    finally:
-        bar.close()
-
-
-def _capture(
-    vehicle: Vehicle,
-    camera: Camera,
-    sim: Any,
-    capture: PlannedCapture,
-    labels: LabelMaker,
-    config: FlownCollectConfig,
-    control: PoseControl,
-    epsilon: float,
-    dataset: FlownDataset,
-) -> dict[str, Any] | None:
-    """Fly to one capture's pose and take it (None: it did not settle or could not be reached)."""
-    try:
-        arrival = fly_to(vehicle, capture.pose, control, config.settling)
-    except FlightTimeoutError as exc:
-        log.warning("%s: %s", capture.id, exc)
-        return None
-    if not arrival.settled:
-        log.warning("%s: not settled within %.0f s", capture.id, config.settling.timeout_s)
-        return None
-    frame = _read_or_wait(vehicle, camera, config)
-    telemetry = vehicle.telemetry()
-    truth = sim.truth.frame() if sim is not None else None
-    pose = pose_of(telemetry)
-    label = labels.label(frame.image, pose)
-    forward, right, up = pose.relative_to(labels.goal.pose)
-    sector = sector_of_offset(*label.offset_px, epsilon) if label.in_view else "none"
-    split = capture.split
-    if split == "goal" and sector != "centre":
-        split = "train"  # a goal capture that flew out of ε is a sector image like any other
-    u, v = label.offset_px[0] + labels.camera.width / 2, label.offset_px[1] + labels.camera.height / 2
-    row: dict[str, Any] = {
-        "split": split,
-        "sector": sector,
-        "target_kind": config.kind,
-        "centre_px": [round(u, 3), round(v, 3)],
-        "offset_px": [round(label.offset_px[0], 3), round(label.offset_px[1], 3)],
-        "bbox_px": None if label.bbox_px is None else [round(x, 3) for x in label.bbox_px],
-        "in_view": label.in_view,
-        "fully_in_view": label.fully_in_view,
-        "drone": {
-            "position_ned_m": [round(x, 4) for x in pose.position.tolist()],
-            "yaw_deg": round(pose.yaw_deg, 3),
-            "velocity_ned_m_s": [
-                round(x, 4)
-                for x in (
-                    telemetry.velocity_ned.north_m_s,
-                    telemetry.velocity_ned.east_m_s,
-                    telemetry.velocity_ned.down_m_s,
-                )
-            ],
-            "roll_deg": round(telemetry.attitude.roll_deg, 3),
-            "pitch_deg": round(telemetry.attitude.pitch_deg, 3),
-            "forward_range_m": telemetry.forward_range_m,
-        },
-        "offset_m": {
-            "right_m": round(right, 4),
-            "up_m": round(up, 4),
-            "forward_m": round(forward, 4),
-            "yaw_deg": round(pose.yaw_deg - labels.goal.pose.yaw_deg, 3),
-        },
-        "flight": dataset.flight,
-        "block": capture.block,
-        "time_s": round(telemetry.timestamp_s, 4),
-        "wall_time": _now(),
-        "frame_number": frame.frame_number,
-        "planned": {"kind": capture.kind, "sector": capture.sector, "offset_px": capture.wanted_offset_px},
-        "settle_s": round(arrival.settle_s, 3),
-        "label": label.record(labels.agree_px, labels.goal.depth_m, labels.goal.distance_source),
-    }
-    if truth is not None:
-        row["truth"] = {**truth["target"], "frame_number": truth["frame_number"], "drone": truth["drone"]}
-    return dataset.write_capture(capture.id, frame.image, row)
-
-
-def _read_or_wait(vehicle: Vehicle, camera: Camera, config: FlownCollectConfig) -> Any:
-    """A frame that arrived once settled; a camera that sends nothing is waited for `loss_wait_s`
-    (holding), then `CameraLostError`."""
-    settled_at = time.monotonic()
-    try:
-        return fresh_frame(camera, settled_at)
-    except CameraError as exc:
-        log.warning("camera: %s; holding and waiting %.0f s for it", exc, config.loss_wait_s)
-        vehicle.hold()
-        give_up = time.monotonic() + config.loss_wait_s
-        while time.monotonic() < give_up:
-            try:
-                return fresh_frame(camera, time.monotonic(), timeout_s=1.0)
-            except CameraError:
-                vehicle.sleep(0.1)
-        raise CameraLostError(str(exc)) from None
-
-
-def _on_camera_loss(vehicle: Vehicle, config: FlownCollectConfig, goal: GoalRecord | None) -> None:
-    """`--on-loss land`: land where it is; `return`: fly back to the goal pose and hold there (Hold mode)."""
-    if config.on_loss == "return" and goal is not None:
-        try:
-            log.error("camera lost: flying back to the goal pose and holding there (--on-loss return)")
-            fly_to(vehicle, goal.pose, _control(config), config.settling)
-            vehicle.stop_offboard()
-            return
-        except FlightError as exc:
-            log.error("could not return to the goal pose (%s): landing", exc)
-    log.error("camera lost: holding, then landing (--on-loss land)")
-    safe_stop(vehicle)
 
 
 def _meta(
@@ -471,7 +297,7 @@ def _meta(
             "flight": dataset.flight,
             "vehicle": config.vehicle,
             "started": started,
-            "ended": _now(),
+            "ended": now_iso(),
             "captures": tally.taken,
             "flagged": tally.flagged,
             "skipped": tally.skipped,

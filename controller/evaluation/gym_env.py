@@ -22,9 +22,11 @@ flies one of the paper's 9 discrete moves (`controller.planning.actions`: index 
 - **Termination**: the target within ε (default 10 px at 224 px) of the image centre on both
   axes per truth (`terminated`, info "outcome" = "centred"), or out of view ("target_lost").
   **Truncation**: `max_steps` moves without either (info "outcome" = "max_steps").
+- **Constructor**: `scene` (a scene file or mapping; default the shipped family) and `kinds` (kinds
+  of your own, as a mission's `kinds:`) choose the world; `target_kind` may then name one of them.
 - **`reset(seed=…, options=…)`**: options `scene_seed` (int), `target_kind` ("gauge", "valve",
-  "switchbox"), `start` (`{right_m, up_m, distance_m, yaw_deg}`, the drone's offset from the
-  centred pose), `instruction` (str). Unset ones are drawn from the episode's seed: an unseen
+  "switchbox" or a kind of the scene's), `start` (`{right_m, up_m, distance_m, yaw_deg}`, the drone's
+  offset from the centred pose), `instruction` (str). Unset ones are drawn from the episode's seed: an unseen
   scene, a start with the target 15–80 % of the half view off-centre, a phrasing from the
   `instructions` corpus ("fixed", "train" or "heldout").
 - **`info`**: `offset_px` (truth, None out of view), `centred`, `outcome`, `scene_seed`,
@@ -39,7 +41,7 @@ from __future__ import annotations
 import copy
 import string
 from contextlib import ExitStack
-from typing import Any, ClassVar, get_args
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -52,7 +54,7 @@ except ImportError as exc:  # pragma: no cover - depends on the installed extras
     ) from exc
 
 from controller.missions.kits.sim import SimWorld, open_sim_world
-from controller.missions.schema import Mission, TargetKindName, parse_mission
+from controller.missions.schema import Mission, parse_mission
 from controller.planning.actions import ALL_ACTIONS, Action
 from controller.planning.loop_records import MoveSchedule
 from controller.training.instructions import CORPORA, builtin_templates, fill
@@ -60,7 +62,6 @@ from drone_inspect_core.centring import default_epsilon_px, within
 from flight.moves import fly_offset, take_off_to_start
 
 ENV_ID = "DroneInspect/Centring-v0"
-TARGET_KINDS = get_args(TargetKindName)
 MOVES = ("fixed", "constant")
 INSTRUCTION_CHARSET = frozenset(string.ascii_letters + string.digits + " .,;:!?'\"-()/&")
 MAX_INSTRUCTION_CHARS = 200
@@ -89,6 +90,8 @@ class CentringEnv(gym.Env[dict[str, Any], np.int64]):
         view_fraction: tuple[float, float] = (0.15, 0.8),
         distance_m: tuple[float, float] = (1.6, 2.6),
         yaw_deg: tuple[float, float] = (-8.0, 8.0),
+        scene: str | dict[str, Any] | None = None,
+        kinds: dict[str, Any] | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
@@ -105,6 +108,8 @@ class CentringEnv(gym.Env[dict[str, Any], np.int64]):
         self.moves = moves
         self.move_m = move_m
         self.instructions = instructions
+        self._scene = scene
+        self._kinds = dict(kinds or {})
         self._templates = builtin_templates(instructions)
         self._random_start = {
             "view_fraction": list(view_fraction), "distance_m": list(distance_m), "yaw_deg": list(yaw_deg)
@@ -238,15 +243,14 @@ class CentringEnv(gym.Env[dict[str, Any], np.int64]):
         if scene_seed is None:
             scene_seed = int(rng.integers(0, 2**31 - 1))
         kind = options.get("target_kind")
-        if kind is not None and kind not in TARGET_KINDS:
-            raise ValueError(f"target_kind must be one of {TARGET_KINDS}, got {kind!r}")
         start = options.get("start")
         if start is None:
             start = {"random": {"seed": int(rng.integers(0, 2**31 - 1)), **self._random_start}}
         return parse_mission(
             {
                 "name": "gym-centring",
-                "scene": {"seed": int(scene_seed)},
+                "kinds": self._kinds,
+                "scene": {"seed": int(scene_seed), "config": self._scene},
                 "target_kind": kind,
                 "start": start,
                 "vehicle": "sim",

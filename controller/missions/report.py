@@ -28,7 +28,7 @@ from typing import Any
 from matplotlib.figure import Figure  # the object API: no pyplot state, no GUI backend
 from PIL import Image
 
-from controller.planning.loop_records import StepRecord
+from controller.planning.loop_records import Outcome, StepEvent, StepRecord
 from drone_inspect_core.files import claim_dir, release_claim, write_atomic, write_json_atomic
 from perception.annotate import annotate
 from perception.types import Detection
@@ -64,7 +64,7 @@ def step_to_json(step: StepRecord) -> dict[str, Any]:
     det = step.detection
     return {
         "index": step.index,
-        "event": step.event,
+        "event": step.event.value,
         "frame_number": step.frame.frame_number,
         "vehicle_time_s": round(step.vehicle_time_s, 3),
         "detection": None if det is None else detection_to_json(det),
@@ -163,7 +163,7 @@ def write_setup_failure(out_dir: Path, mission: Any, error: BaseException) -> No
         "camera": mission.camera,
         "mission_file": mission.model_dump(mode="json"),
         "status": "failed_to_start",
-        "outcome": "error",
+        "outcome": Outcome.ERROR.value,
         "passed": False,
         "error": how,
         "steps": [],
@@ -299,8 +299,8 @@ class ReportWriter:
         ax_path.plot(east[0], up[0], "s", color="tab:green", label="start")
         ax_path.plot(east[-1], up[-1], "*", color="tab:red", markersize=12, label="end")
         for s in self.steps:
-            if s.event in ("lost", "recovery"):
-                ax_path.annotate(s.event, (east[s.index], up[s.index]), fontsize=7)
+            if s.event in (StepEvent.LOST, StepEvent.RECOVERY):
+                ax_path.annotate(s.event.value, (east[s.index], up[s.index]), fontsize=7)
         ax_path.set(xlabel="east (m) = right", ylabel="up (m)", title="drone path in the wall plane")
         ax_path.set_aspect("equal", adjustable="datalim")
         ax_path.legend(fontsize=8)

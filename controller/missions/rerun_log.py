@@ -115,8 +115,8 @@ class RerunRecorder:
         if step.distances is not None:
             for action, distance in zip(ALL_ACTIONS, step.distances, strict=True):
                 rec.log(f"planner/distance/{action.name.replace('/', '_')}", rr.Scalars(float(distance)))
-        if step.action is not None or step.event:
-            text = f"step {step.index}: {step.action.name if step.action else '-'} {step.event}".strip()
+        if step.action is not None or step.event.value:
+            text = f"step {step.index}: {step.action.name if step.action else '-'} {step.event.value}".strip()
             rec.log("planner/action", rr.TextLog(text))
         if step.move_m is not None:
             rec.log("move/commanded/right_m", rr.Scalars(float(step.move_m[0])))

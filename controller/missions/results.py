@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from controller.missions.schema import Mission
-from controller.planning.loop_records import Outcome, StepRecord
+from controller.planning.loop_records import Outcome, StepEvent, StepRecord
 
 
 @dataclass(frozen=True)
@@ -22,7 +22,7 @@ class MissionResult:
 
     name: str
     planner: str
-    outcome: str
+    outcome: Outcome
     passed: bool
     failures: tuple[str, ...]
     steps: int
@@ -68,7 +68,7 @@ class MissionResult:
 
 def count_steps(steps: list[StepRecord]) -> int:
     """Steps as the budget counts them: planner decisions plus recovery moves."""
-    return sum(1 for s in steps if s.action is not None or s.event == "recovery")
+    return sum(1 for s in steps if s.action is not None or s.event is StepEvent.RECOVERY)
 
 
 def wrong_target(
@@ -115,12 +115,12 @@ def judge(
         failures.append(
             f"wrong target centred: target {wrong_target_index} is within ε per truth, not the named one"
         )
-    if outcome.value != expect.outcome:
-        failures.append(f"outcome {outcome.value}, expected {expect.outcome}")
+    if outcome is not expect.outcome:
+        failures.append(f"outcome {outcome}, expected {expect.outcome}")
     final = final_truth_offset_px if has_truth else final_detector_offset_px
     source = "truth" if has_truth else "detector"
     error_px = None if final is None else max(abs(final[0]), abs(final[1]))
-    if expect.outcome == Outcome.CENTRED.value:
+    if expect.outcome is Outcome.CENTRED:
         if error_px is None:
             failures.append(f"target not in view at the end per {source}")
         elif error_px > epsilon_px:

@@ -8,7 +8,9 @@
   served as a PX4-flavoured MAVLink vehicle and an MJPEG stream), flown with the
   MAVSDK backend and the stream camera exactly as a real drone; truth from the
   sim's `/truth.json` endpoint, for judging only (`controller.missions.kits.sim_mavlink`).
-- a MAVLink URL: a real vehicle and the `camera` stream URL; no truth.
+- `vehicle: px4-sitl` / `ardupilot-sitl`: real autopilot firmware (SITL) flying that world in
+  lockstep through a bridge (`kits.px4_sitl`, `kits.ardupilot_sitl`), flown as a real vehicle.
+- a MAVLink URL: a real vehicle (PX4 or ArduPilot) and the `camera` stream URL; no truth.
 
 `fly_kit(kit, mission, out_dir)` then flies: connect → ready → arm → take off →
 (sim: place the drone at the mission's start pose) → zero setpoint → offboard →
@@ -35,7 +37,7 @@ from controller.missions.report import (
     write_setup_failure,
 )
 from controller.missions.results import MissionResult, count_steps, judge, wrong_target
-from controller.missions.schema import PX4_SITL, SIM, SIM_MAVLINK, Mission
+from controller.missions.schema import ARDUPILOT_SITL, PX4_SITL, SIM, SIM_MAVLINK, Mission
 from controller.planning.grounding import TargetQuery
 from controller.planning.loop import CentringLoop
 from controller.planning.loop_records import (
@@ -67,6 +69,7 @@ def loop_config(
     mission: Mission, epsilon_px: float, instruction: str, target: TargetQuery | None = None
 ) -> CentringConfig:
     return CentringConfig(
+        **mission.loop.model_dump(),
         epsilon_px=epsilon_px,
         instruction=instruction,
         target=target,
@@ -74,7 +77,6 @@ def loop_config(
         timeout_s=mission.timeout_s,
         stop_margin_px=mission.stop_margin_px,
         **({"fresh_frame_s": FAST_SIM_FRESH_FRAME_S} if mission.sim_speed != 1.0 else {}),
-        **mission.loop.as_kwargs(),
     )
 
 
@@ -244,7 +246,7 @@ def _finish(
     return MissionResult(
         name=mission.name,
         planner=kit.planner.name,
-        outcome=outcome.value,
+        outcome=outcome,
         passed=not failures,
         failures=tuple(failures),
         steps=n_steps,
@@ -288,6 +290,10 @@ def open_kit(
             from controller.missions.kits.px4_sitl import open_px4_sitl_kit
 
             yield stack.enter_context(open_px4_sitl_kit(mission, out_dir, models))
+        elif mission.vehicle == ARDUPILOT_SITL:
+            from controller.missions.kits.ardupilot_sitl import open_ardupilot_sitl_kit
+
+            yield stack.enter_context(open_ardupilot_sitl_kit(mission, out_dir, models))
         else:
             from controller.missions.kits.real import open_real_kit
 

@@ -9,14 +9,16 @@ traceback from inside pydantic or PyYAML.
 name: sector-ne                  # required; used for the report folder
 tags: [sector, quick]
 scene: {seed: 1001}              # or {config: scenes/x.yaml, seed: 3}, or {config: {...inline...}, seed: 3}
-target_kind: gauge               # gauge | valve | switchbox | null (the scene draws one)
+kinds: {}                        # your own: {flange: {image: f.png, size_m: [0.3, 0.3], words: [flange]}}
+target_kind: gauge               # gauge | valve | switchbox | a kind of yours | null (the scene draws one)
 targets: 1                       # 1..4 targets on the wall, the named one included
 twins: false                     # one other target of the named kind, in another trim colour (targets >= 2)
 target_attribute: null           # the named target's trim colour: black | grey | red | blue | yellow | null
 start: {right_m: -0.5, up_m: -0.4, distance_m: 2.0, yaw_deg: 0}   # drone pose relative to the centred pose
 # start: {random: {seed: 7, view_fraction: [0.2, 0.8], distance_m: [1.6, 2.6], yaw_deg: [-8, 8]}}
 instruction: center the gauge     # null: "center the <kind>", "center the <colour> <kind>" with twins
-vehicle: sim                     # sim | sim-mavlink | px4-sitl | a MAVLink URL (udpin://0.0.0.0:14540, serial:///dev/ttyACM0:57600)
+vehicle: sim                     # sim | sim-mavlink | px4-sitl | ardupilot-sitl | a MAVLink URL (udpin://...)
+autopilot: auto                  # a URL's autopilot: auto (its HEARTBEAT) | px4 (MAVSDK) | ardupilot
 camera: sim                      # sim | a stream URL (http://host:8080/stream.mjpg, rtsp://...)
 planner: latent                  # latent | classic | random | oracle
 checkpoint: null                 # null: the shipped one
@@ -26,10 +28,11 @@ stop_margin_px: null             # stop at ε − this per detector; null: 2 px 
 max_steps: 20
 timeout_s: 120
 wind: {mean_enu_m_s: [0.3, 0, 0], gust_std_m_s: 0.2}
-loop: {max_move_m: 1.0}          # CentringConfig overrides (move scheme, refinement budget, ...)
+loop: {max_move_m: 1.0}          # the loop's settings (move scheme, refinement budget, ...): LoopSettings
 expect: {outcome: centred, max_steps: 12, final_offset_px: 10}
 sim_speed: 1.0                   # vehicle: sim-mavlink only: simulated s per wall s, or max
 px4: {instance: auto, speed: 1.0}  # vehicle: px4-sitl only (the PX4 folder: --px4 or $PX4_SITL_DIR)
+ardupilot: {instance: auto, speed: 1.0}  # vehicle: ardupilot-sitl only (--ardupilot, $ARDUPILOT_SITL_DIR)
 ```
 
 `start` is the drone's pose relative to the pose that centres the target (in front
@@ -50,28 +53,35 @@ from pydantic import (
     Discriminator,
     Field,
     Tag,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
 
-from controller.missions.schema_specs import FaultSpec, PortSpec, Px4Spec
+from controller.missions.schema_specs import ArduPilotSpec, AutopilotName, FaultSpec, PortSpec, Px4Spec
 from controller.planning.grounding import parse_instruction
+from controller.planning.loop_records import LoopSettings, Outcome
+from controller.planning.planners import PLANNERS, PlannerName
 from drone_inspect_core.config_files import ConfigFileError, Range, StrictModel, read_yaml, validate_mapping
 from drone_inspect_core.sim_speed import parse_sim_speed
-from drone_inspect_core.targets import ATTRIBUTE_COLOURS
+from drone_inspect_core.vocabulary import (
+    Vocabulary,
+    VocabularyError,
+    shipped_vocabulary,
+    validated_kinds,
+    vocabulary_with,
+)
 from flight.errors import ConnectionUrlError
 from flight.urls import validate_connection_url
 
-PlannerName = Literal["latent", "classic", "random", "oracle"]
-PLANNER_NAMES: tuple[str, ...] = ("latent", "classic", "random", "oracle")
-TargetKindName = Literal["gauge", "valve", "switchbox"]
 DetectorName = Literal["image", "truth"]
-OutcomeName = Literal["centred", "max_steps", "timeout", "target_lost", "target_not_found", "planner_stalled"]
 
 SIM = "sim"
 SIM_MAVLINK = "sim-mavlink"
 PX4_SITL = "px4-sitl"
-SIMULATED_VEHICLES = (SIM, SIM_MAVLINK, PX4_SITL)
+ARDUPILOT_SITL = "ardupilot-sitl"
+SIMULATED_VEHICLES = (SIM, SIM_MAVLINK, ARDUPILOT_SITL, PX4_SITL)
+_SIMULATED = ", ".join(map(repr, SIMULATED_VEHICLES))
 _MAVLINK_SCHEMES = ("udp://", "udpin://", "udpout://", "tcp://", "tcpin://", "tcpout://", "serial://")
 _STREAM_SCHEMES = ("http://", "https://", "rtsp://", "file://")
 
@@ -164,29 +174,6 @@ class WindSpec(StrictModel):
     gust_time_constant_s: float = Field(default=2.0, gt=0.0)
 
 
-class LoopOverrides(StrictModel):
-    """Overrides of `controller.planning.loop.CentringConfig` (unset fields keep its defaults)."""
-
-    move_m: float | None = Field(default=None, gt=0.0, le=2.0)
-    min_move_m: float | None = Field(default=None, gt=0.0, le=2.0)
-    shrink: float | None = Field(default=None, gt=0.0, le=1.0)
-    speed_m_s: float | None = Field(default=None, gt=0.0, le=2.0)
-    settle_s: float | None = Field(default=None, ge=0.0, le=5.0)
-    max_stalls: int | None = Field(default=None, ge=1, le=20)
-    lost_recoveries: int | None = Field(default=None, ge=0, le=5)
-    not_found_rereads: int | None = Field(default=None, ge=0, le=50)
-    max_refinements: int | None = Field(default=None, ge=0, le=20)
-    max_second_choices: int | None = Field(default=None, ge=0, le=20)
-    scale_moves: bool | None = None
-    max_move_m: float | None = Field(default=None, gt=0.0, le=3.0)
-    move_gain: float | None = Field(default=None, gt=0.0, le=2.0)
-    assumed_distance_m: float | None = Field(default=None, gt=0.0, le=20.0)
-    hfov_deg: float | None = Field(default=None, gt=0.0, lt=180.0)
-
-    def as_kwargs(self) -> dict[str, Any]:
-        return {k: v for k, v in self.model_dump().items() if v is not None}
-
-
 class Expectations(StrictModel):
     """What must hold when the loop ends; an unset limit is not checked.
 
@@ -194,7 +181,7 @@ class Expectations(StrictModel):
     image centre per simulator truth (per the detector where there is no truth).
     """
 
-    outcome: OutcomeName = "centred"
+    outcome: Outcome = Outcome.CENTRED
     max_steps: int | None = Field(default=None, ge=0)
     final_offset_px: float | None = Field(default=None, gt=0.0)
     """The final truth offset, max(|du|, |dv|), must not exceed this."""
@@ -206,14 +193,18 @@ class Mission(StrictModel):
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
     tags: tuple[str, ...] = ()
     description: str = ""
+    kinds: dict[str, dict[str, Any]] = Field(default_factory=dict)
+    """Target kinds the mission adds (`drone_inspect_core.vocabulary.parse_kind`; images relative to the
+    mission file): the scene may draw them, the instruction may name them."""
     scene: SceneSpec = SceneSpec()
-    target_kind: TargetKindName | None = None
+    target_kind: str | None = None
+    """The named target's kind (shipped, or the mission's or its inline scene's own); None: drawn."""
     targets: int = Field(default=1, ge=1, le=4)
     """Targets on the wall, the named one (the one to centre) included."""
     twins: bool = False
     """One other target has the named target's kind, in another trim colour (needs targets >= 2)."""
     target_attribute: str | None = None
-    """The named target's trim colour (a name of `drone_inspect_core.targets.ATTRIBUTE_COLOURS`);
+    """The named target's trim colour (a colour name of `drone_inspect_core.vocabulary`);
     None: drawn."""
     start: Start = StartOffset()
     instruction: str | None = None
@@ -234,13 +225,16 @@ class Mission(StrictModel):
     timeout_s: float = Field(default=120.0, gt=0.0)
     takeoff_altitude_m: float = Field(default=1.5, gt=0.3, le=4.0)
     wind: WindSpec | None = None
-    loop: LoopOverrides = LoopOverrides()
+    loop: LoopSettings = LoopSettings()
+    """How the centring loop moves and waits (`controller.planning.loop_records.LoopSettings`)."""
     expect: Expectations = Expectations()
     ports: PortSpec = PortSpec()
     sim_speed: float | Literal["max"] = 1.0
     """sim-mavlink: the sim-vehicle's speed (`sim_world.vehicle.config.parse_sim_speed`); the controller
     then times its moves on the vehicle's clock."""
     px4: Px4Spec = Px4Spec()
+    ardupilot: ArduPilotSpec = ArduPilotSpec()
+    autopilot: AutopilotName = "auto"
     faults: FaultSpec = FaultSpec()
 
     @field_validator("sim_speed", mode="before")
@@ -248,12 +242,34 @@ class Mission(StrictModel):
     def _sim_speed(cls, value: float | str) -> float | str:
         return parse_sim_speed(value)
 
+    @field_validator("kinds", mode="before")
+    @classmethod
+    def _kinds(cls, value: object, info: ValidationInfo) -> object:
+        return validated_kinds(value, (info.context or {}).get("base_dir"))
+
     @field_validator("target_attribute")
     @classmethod
     def _known_colour(cls, value: str | None) -> str | None:
-        if value is not None and value not in ATTRIBUTE_COLOURS:
-            raise ValueError(f"must be one of {', '.join(ATTRIBUTE_COLOURS)} or null, got {value!r}")
+        colours = shipped_vocabulary().colour_names
+        if value is not None and value not in colours:
+            raise ValueError(f"must be one of {', '.join(colours)} or null, got {value!r}")
         return value
+
+    @property
+    def vocabulary(self) -> Vocabulary:
+        """The shipped vocabulary, with the kinds of an inline scene config and of the mission itself (a
+        scene file's own kinds join when the scene is built: `controller.missions.setup`)."""
+        inline = self.scene.config.get("kinds") if isinstance(self.scene.config, dict) else None
+        return vocabulary_with(inline or {}, self.kinds)
+
+    @model_validator(mode="after")
+    def _known_kind(self) -> Mission:
+        if self.target_kind is not None and not isinstance(self.scene.config, str):
+            try:
+                self.vocabulary.kind(self.target_kind)
+            except VocabularyError as exc:
+                raise ValueError(f"target_kind: {exc}") from None
+        return self
 
     @model_validator(mode="after")
     def _named_target(self) -> Mission:
@@ -263,7 +279,7 @@ class Mission(StrictModel):
                 f"twins: needs targets >= 2 (the named one and its twin), got targets {self.targets}"
             )
         if self.instruction is not None and (self.twins or self.target_attribute is not None):
-            named = parse_instruction(self.instruction).attribute
+            named = parse_instruction(self.instruction, self.vocabulary).attribute
             if named is None and self.twins:
                 raise ValueError(
                     f"instruction: {self.instruction!r} names no colour, but the scene has twins "
@@ -288,7 +304,7 @@ class Mission(StrictModel):
             )
         if self.vehicle not in SIMULATED_VEHICLES and not self.vehicle.startswith(_MAVLINK_SCHEMES):
             raise ValueError(
-                f"vehicle: {self.vehicle!r} is neither 'sim', 'sim-mavlink', 'px4-sitl' nor a MAVLink URL "
+                f"vehicle: {self.vehicle!r} is neither {_SIMULATED} nor a MAVLink URL "
                 f"({', '.join(s + '...' for s in _MAVLINK_SCHEMES)})"
             )
         if self.is_real:
@@ -310,29 +326,34 @@ class Mission(StrictModel):
             )
         if self.sim_speed != 1.0 and self.vehicle != SIM_MAVLINK:
             raise ValueError(
-                f"sim_speed: goes with vehicle sim-mavlink, not {self.vehicle!r} (px4-sitl: px4.speed)"
+                f"sim_speed: goes with vehicle sim-mavlink, not {self.vehicle!r} (SITL: px4/ardupilot.speed)"
             )
         if self.is_real and self.detector == "truth":
             raise ValueError("detector: 'truth' needs the simulator; a real vehicle uses the image detector")
         if self.vehicle != SIM and self.detector == "truth":
             raise ValueError("detector: 'truth' is available in the in-process sim only (vehicle: sim)")
-        if self.vehicle not in (SIM, PX4_SITL) and self.wind is not None:
-            raise ValueError("wind: only the simulated worlds of 'sim' and 'px4-sitl' simulate wind")
-        mavlink_sim = self.vehicle in (SIM_MAVLINK, PX4_SITL)
+        if self.vehicle not in (SIM, PX4_SITL, ARDUPILOT_SITL) and self.wind is not None:
+            raise ValueError("wind: only the worlds of 'sim', 'px4-sitl' and 'ardupilot-sitl' simulate wind")
+        mavlink_sim = self.vehicle in (SIM_MAVLINK, PX4_SITL, ARDUPILOT_SITL)
         if self.faults.link is not None and not (mavlink_sim or self.vehicle.startswith("udpin://")):
             raise ValueError(
-                "faults.link: needs a relayed MAVLink link: sim-mavlink, px4-sitl or a udpin:// URL"
+                "faults.link: needs a relayed MAVLink link: sim-mavlink, a SITL vehicle or a udpin:// URL"
             )
         if (self.faults.camera is not None or self.faults.vehicle_dies_at_s is not None) and not mavlink_sim:
             raise ValueError(
-                "faults: camera faults and a dying vehicle are simulated by sim-mavlink and px4-sitl only"
+                "faults: camera faults and a dying vehicle: ardupilot-sitl, sim-mavlink and px4-sitl only"
             )
         if self.faults.gust_m_s and self.is_real:
             raise ValueError("faults.gust_m_s: only a simulated world has wind to make gusty")
-        if self.vehicle != PX4_SITL and "px4" in self.model_fields_set:
-            raise ValueError(f"px4: only a 'px4-sitl' mission runs PX4 SITL (vehicle is {self.vehicle!r})")
-        if self.is_real and self.planner == "oracle":
-            raise ValueError("planner: 'oracle' needs simulator truth, which a real vehicle does not have")
+        for key, sitl in (("px4", PX4_SITL), ("ardupilot", ARDUPILOT_SITL)):
+            if self.vehicle != sitl and key in self.model_fields_set:
+                raise ValueError(f"{key}: only a '{sitl}' mission runs it (vehicle is {self.vehicle!r})")
+        if not self.is_real and self.autopilot != "auto":
+            raise ValueError(f"autopilot: goes with a MAVLink URL; {self.vehicle!r} knows its own autopilot")
+        if self.is_real and PLANNERS[self.planner].needs_truth:
+            raise ValueError(
+                f"planner: {self.planner!r} needs simulator truth, which a real vehicle does not have"
+            )
         return self
 
     @property
@@ -373,7 +394,10 @@ def parse_mission(
     if not isinstance(data, dict):
         kind = type(data).__name__
         raise MissionFileError(source, None, f"expected a mapping at the top level, got {kind}")
-    return validate_mapping(Mission, {**data, **(overrides or {})}, source, MissionFileError, _UNNAMED)
+    base_dir = Path(source).parent if isinstance(source, Path) else None
+    return validate_mapping(
+        Mission, {**data, **(overrides or {})}, source, MissionFileError, _UNNAMED, {"base_dir": base_dir}
+    )
 
 
 def load_mission(path: str | Path, overrides: dict[str, Any] | None = None) -> Mission:
@@ -382,7 +406,11 @@ def load_mission(path: str | Path, overrides: dict[str, Any] | None = None) -> M
     data = read_yaml(path, MissionFileError)
     mission = parse_mission(data, path)  # the file alone first: its own errors name the file
     if overrides:  # then the command line's changes, whose errors name the command line
-        mission = parse_mission(data, f"command-line options over {path}", overrides)
+        source = f"command-line options over {path}"
+        base_dir = path.parent
+        mission = validate_mapping(
+            Mission, {**data, **overrides}, source, MissionFileError, _UNNAMED, {"base_dir": base_dir}
+        )
     if isinstance(mission.scene.config, str) and not Path(mission.scene.config).is_absolute():
         # A scene file is found relative to the mission file, so a suite folder can be moved as a whole.
         resolved = (path.parent / mission.scene.config).resolve()

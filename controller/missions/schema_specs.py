@@ -1,5 +1,5 @@
 """The mission file's sections about where and how a simulated or relayed flight runs: ports, PX4
-SITL, injected faults (`controller.missions.schema` re-exports them)."""
+SITL, ArduPilot SITL, injected faults (`controller.missions.schema` re-exports them)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,10 @@ from typing import Literal
 from pydantic import Field, field_validator
 
 from drone_inspect_core.config_files import StrictModel
+
+AutopilotName = Literal["auto", "px4", "ardupilot"]
+"""A MAVLink URL's autopilot (`Mission.autopilot`): "auto" (told by its HEARTBEAT), "px4" (flown with
+MAVSDK) or "ardupilot" (flown in GUIDED mode, `flight.ardupilot_backend`)."""
 
 
 class PortSpec(StrictModel):
@@ -26,21 +30,17 @@ class PortSpec(StrictModel):
         return value
 
 
-class Px4Spec(StrictModel):
-    """How a `px4-sitl` mission runs PX4 SITL (see `sim_world.px4_bridge`)."""
+class SitlSpec(StrictModel):
+    """What a mission flown by a real autopilot's SITL (PX4, ArduPilot) says about running it."""
 
     dir: str | None = None
-    """PX4 SITL build folder; None: the `--px4` option, else $PX4_SITL_DIR."""
+    """The autopilot's SITL folder; None: the command line's option, else its environment variable."""
     instance: int | Literal["auto"] = "auto"
-    """PX4 instance 0..9 (ports 4560+N, 14540+N); "auto": the lowest one no other run holds."""
+    """Instance 0..9 (the autopilot's ports shift with it); "auto": the lowest one nobody holds."""
     speed: float | Literal["max"] = 1.0
     """Simulated seconds per wall second, or "max" (lockstep as fast as it goes; benchmarks)."""
-    noise: float = Field(default=1.0, gt=0.0, le=10.0)
-    """Scale of every sensor noise and bias (PX4 refuses perfectly constant sensors: > 0)."""
-    keep_ulog: bool = True
-    """Copy PX4's .ulg flight log into the report folder (`px4/`); ~4 MB per 20 s."""
     params: dict[str, float] = Field(default_factory=dict)
-    """PX4 parameters set at boot (`MPC_XY_VEL_MAX: 1.0`)."""
+    """Autopilot parameters set at boot (`MPC_XY_VEL_MAX: 1.0`, `WPNAV_SPEED: 300`)."""
 
     @field_validator("instance")
     @classmethod
@@ -55,6 +55,28 @@ class Px4Spec(StrictModel):
         if isinstance(value, float) and not 0.05 <= value <= 100.0:
             raise ValueError(f"must be in [0.05, 100] or 'max', got {value:g}")
         return value
+
+
+class Px4Spec(SitlSpec):
+    """How a `px4-sitl` mission runs PX4 SITL (see `sim_world.px4_bridge`; ports 4560+N, 14540+N)."""
+
+    noise: float = Field(default=1.0, gt=0.0, le=10.0)
+    """Scale of every sensor noise and bias (PX4 refuses perfectly constant sensors: > 0)."""
+    keep_ulog: bool = True
+    """Copy PX4's .ulg flight log into the report folder (`px4/`); ~4 MB per 20 s."""
+
+
+class ArduPilotSpec(SitlSpec):
+    """How an `ardupilot-sitl` mission runs ArduCopter SITL (see `sim_world.ardupilot_bridge`; ports
+    9002+10N, 5760+10N). Its folder: `--ardupilot`, else $ARDUPILOT_SITL_DIR, else
+    ../shared/ardupilot-sitl."""
+
+    noise: float = Field(default=1.0, ge=0.0, le=10.0)
+    """Scale of the IMU noise and bias the bridge adds (0: none; ArduPilot simulates GPS, baro, compass)."""
+    keep_logs: bool = True
+    """Copy ArduPilot's .BIN flight logs into the report folder (`ardupilot/`); ~1 MB per simulated min."""
+    hold_mode: Literal["BRAKE", "LOITER"] = "BRAKE"
+    """The mode that holds after takeoff and outside offboard (LOITER follows the pilot's throttle)."""
 
 
 class LinkFaultSpec(StrictModel):

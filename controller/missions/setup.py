@@ -32,9 +32,12 @@ def scene_config_for(mission: Mission) -> SceneConfig:
         config = load_scene_config(spec)
     else:
         config = parse_scene_config(spec, source=f"mission {mission.name}: scene.config")
-    if mission.target_kind is not None:
-        target = config.target.model_copy(update={"kinds": (mission.target_kind,)})
-        config = config.model_copy(update={"target": target})
+    if mission.kinds or mission.target_kind is not None:  # validated again: the kind must be the scene's
+        data = config.model_dump(mode="json")
+        data["kinds"] = {**data["kinds"], **mission.kinds}
+        if mission.target_kind is not None:
+            data["target"]["kinds"] = [mission.target_kind]
+        config = parse_scene_config(data, source=f"mission {mission.name}: kinds/target_kind over its scene")
     if mission.targets != 1 or mission.twins or mission.target_attribute is not None:
         config = with_targets(
             config,

@@ -22,11 +22,13 @@ from typing import Any
 from controller.missions.report import claim_report_dir
 from controller.missions.results import MissionResult
 from controller.missions.schema import (
+    ARDUPILOT_SITL,
     PX4_SITL,
     Mission,
     MissionFileError,
     load_mission,
 )
+from controller.planning.loop_records import Outcome
 from drone_inspect_core.files import release_claim
 
 log = logging.getLogger(__name__)
@@ -44,6 +46,8 @@ class SuiteOptions:
     exclude_tags: tuple[str, ...] = ()
     px4_dir: str | None = None
     """The PX4 SITL folder for `px4-sitl` missions that name none (None: $PX4_SITL_DIR)."""
+    ardupilot_dir: str | None = None
+    """The ArduPilot SITL folder for `ardupilot-sitl` missions that name none (None: their default)."""
 
     def __post_init__(self) -> None:
         if self.parallel < 1:
@@ -105,7 +109,7 @@ def failed_to_start(mission: Mission, error: str, wall_s: float) -> MissionResul
     return MissionResult(
         name=mission.name,
         planner=mission.planner,
-        outcome="error",
+        outcome=Outcome.ERROR,
         passed=False,
         failures=(f"error: {error}",),
         steps=0,
@@ -121,14 +125,17 @@ def failed_to_start(mission: Mission, error: str, wall_s: float) -> MissionResul
     )
 
 
-def with_px4_dir(missions: list[Mission], options: SuiteOptions) -> list[Mission]:
-    """px4-sitl missions that name no PX4 folder get the suite's."""
+def with_sitl_dirs(missions: list[Mission], options: SuiteOptions) -> list[Mission]:
+    """SITL missions (px4-sitl, ardupilot-sitl) that name no autopilot folder get the suite's."""
     out = []
     for mission in missions:
         if mission.vehicle == PX4_SITL and mission.px4.dir is None and options.px4_dir is not None:
             mission = mission.model_copy(
                 update={"px4": mission.px4.model_copy(update={"dir": options.px4_dir})}
             )
+        if mission.vehicle == ARDUPILOT_SITL and mission.ardupilot.dir is None and options.ardupilot_dir:
+            spec = mission.ardupilot.model_copy(update={"dir": options.ardupilot_dir})
+            mission = mission.model_copy(update={"ardupilot": spec})
         out.append(mission)
     return out
 
@@ -147,7 +154,7 @@ def run_suite(directory: str | Path, options: SuiteOptions) -> SuiteResult:
         raise ValueError(
             f"no mission in {directory} matches tags {options.tags} minus {options.exclude_tags}"
         )
-    missions = with_px4_dir(missions, options)
+    missions = with_sitl_dirs(missions, options)
     out = claim_report_dir(options.report_dir)  # a suite's reports never go over an earlier run's
     for mission in missions:  # each mission then claims its own (empty) folder
         (out / mission.name).mkdir()

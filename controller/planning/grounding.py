@@ -1,8 +1,9 @@
 """Grounding the instruction: which of the detected targets it names.
 
-`parse_instruction(text) -> TargetQuery` reads the target's kind and trim colour from
-the words of the instruction with a fixed lexicon (below); `select_target(detections,
-query)` picks the strongest detection that fits. Pure Python: no model, no torch.
+`parse_instruction(text, vocabulary) -> TargetQuery` reads the target's kind and trim colour from
+the words of the instruction, with the words of the vocabulary (`drone_inspect_core.vocabulary`:
+every phrase of a kind, every word of a colour); `select_target(detections, query)` picks the
+strongest detection that fits. Pure Python: no model, no torch.
 
 Matching rules (tested in tests/test_grounding.py):
 
@@ -22,54 +23,24 @@ any kind is the target (today's single-target behaviour).
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from drone_inspect_core.targets import ATTRIBUTE_COLOURS, TARGET_KINDS
+from drone_inspect_core.vocabulary import Vocabulary, normalise_phrase, shipped_vocabulary
 from perception.types import Detection
-
-KIND_SYNONYMS: dict[str, tuple[str, ...]] = {
-    "gauge": (
-        "gauge", "gauges", "gage", "pressure gauge", "manometer", "dial", "dials", "meter",
-        "pressure dial", "pressure meter", "dial gauge", "indicator dial", "barometer",
-    ),
-    "valve": (
-        "valve", "valves", "handwheel", "handwheels", "hand wheel", "wheel", "wheels", "gate valve",
-        "shut off valve", "shutoff valve", "stop valve", "ball valve", "globe valve", "tap",
-        "spigot", "stopcock",
-    ),
-    "switchbox": (
-        "switchbox", "switchboxes", "switch box", "switch boxes", "electrical box", "control box",
-        "panel", "control panel", "electrical panel", "breaker box", "fuse box", "junction box",
-        "junction cabinet", "cabinet", "enclosure", "isolator", "disconnect switch", "distribution box",
-    ),
-}  # fmt: skip
-"""Every phrase that names a kind (lower case, words separated by single spaces)."""
-
-COLOUR_WORDS: dict[str, tuple[str, ...]] = {
-    "black": ("black",),
-    "grey": ("grey", "gray", "silver", "silvery"),
-    "red": ("red", "crimson", "scarlet"),
-    "blue": ("blue", "navy"),
-    "yellow": ("yellow", "gold", "golden", "amber"),
-}
-"""Every word that names an attribute colour (`drone_inspect_core.targets.ATTRIBUTE_COLOURS`)."""
 
 
 @dataclass(frozen=True)
 class TargetQuery:
-    """What the instruction asks for: a kind and a trim colour, each None when not named."""
+    """What the instruction asks for: a kind and a trim colour, each None when not named.
+
+    The names are the vocabulary's (`drone_inspect_core.vocabulary`): a kind a scene or mission added
+    is as good as a shipped one; `parse_instruction` only ever gives names its vocabulary holds."""
 
     kind: str | None = None
     attribute: str | None = None
-
-    def __post_init__(self) -> None:
-        if self.kind is not None and self.kind not in TARGET_KINDS:
-            raise ValueError(f"kind must be one of {TARGET_KINDS} or None, got {self.kind!r}")
-        if self.attribute is not None and self.attribute not in ATTRIBUTE_COLOURS:
-            known = tuple(ATTRIBUTE_COLOURS)
-            raise ValueError(f"attribute must be one of {known} or None, got {self.attribute!r}")
 
     def describe(self) -> str:
         """In words: "red valve", "gauge", "red target", "any target"."""
@@ -92,29 +63,38 @@ def _phrase_pattern(table: dict[str, tuple[str, ...]]) -> tuple[re.Pattern[str],
     return re.compile(rf"(?<![a-z0-9])(?:{body})(?![a-z0-9])"), owner
 
 
-_KIND_PATTERN, _KIND_OF = _phrase_pattern(KIND_SYNONYMS)
-_COLOUR_PATTERN, _COLOUR_OF = _phrase_pattern(COLOUR_WORDS)
+Patterns = tuple[re.Pattern[str], dict[str, str], re.Pattern[str], dict[str, str]]
+
+
+@functools.lru_cache(maxsize=32)
+def _patterns(vocabulary: Vocabulary) -> Patterns:
+    """The kind and colour patterns of a vocabulary (built once per vocabulary)."""
+    kinds, kind_of = _phrase_pattern({k.name: k.words for k in vocabulary.kinds.values()})
+    colours, colour_of = _phrase_pattern({c.name: c.words for c in vocabulary.colours.values()})
+    return kinds, kind_of, colours, colour_of
 
 
 def normalise(text: str) -> str:
     """Lower case; every run of non-alphanumeric characters (punctuation, hyphens) one space."""
-    return " ".join(re.sub(r"[^a-z0-9]+", " ", text.lower()).split())
+    return normalise_phrase(text)
 
 
-def parse_instruction(text: str) -> TargetQuery:
-    """The target the instruction names (see the module docstring for the rules)."""
+def parse_instruction(text: str, vocabulary: Vocabulary | None = None) -> TargetQuery:
+    """The target the instruction names (see the module docstring for the rules), in the words of
+    `vocabulary` (default: the shipped one)."""
+    kind_pattern, kind_of, colour_pattern, colour_of = _patterns(vocabulary or shipped_vocabulary())
     words = normalise(text)
-    kind_match = _KIND_PATTERN.search(words)
-    colours = list(_COLOUR_PATTERN.finditer(words))
+    kind_match = kind_pattern.search(words)
+    colours = list(colour_pattern.finditer(words))
     if kind_match is None:
-        return TargetQuery(None, _COLOUR_OF[colours[0].group()] if colours else None)
+        return TargetQuery(None, colour_of[colours[0].group()] if colours else None)
     start, end = kind_match.span()
 
     def gap(colour: re.Match[str]) -> int:  # characters between the colour word and the kind phrase
         return start - colour.end() if colour.end() <= start else colour.start() - end
 
-    attribute = _COLOUR_OF[min(colours, key=gap).group()] if colours else None
-    return TargetQuery(_KIND_OF[kind_match.group()], attribute)
+    attribute = colour_of[min(colours, key=gap).group()] if colours else None
+    return TargetQuery(kind_of[kind_match.group()], attribute)
 
 
 def select_target(detections: Iterable[Detection], query: TargetQuery) -> Detection | None:

@@ -96,6 +96,7 @@ from controller.planning.loop_records import (
     CentringResult,
     MoveSchedule,
     Outcome,
+    StepEvent,
     StepRecord,
     StepTiming,
     TruthProbe,
@@ -156,11 +157,11 @@ class CentringLoop:
             elif record.detection is None:
                 outcome = self._on_lost(record, state)
             elif record.centred:
-                record.event, outcome = "centred", Outcome.CENTRED
+                record.event, outcome = StepEvent.CENTRED, Outcome.CENTRED
             elif state.decisions >= cfg.max_steps:
-                record.event, outcome = "max_steps", Outcome.MAX_STEPS
+                record.event, outcome = StepEvent.MAX_STEPS, Outcome.MAX_STEPS
             elif self.vehicle.time_s() - state.start_s > cfg.timeout_s:
-                record.event, outcome = "timeout", Outcome.TIMEOUT
+                record.event, outcome = StepEvent.TIMEOUT, Outcome.TIMEOUT
             else:
                 outcome = self._decide_and_move(record, state)
             read_s, detect_s, plan_s = record.timing.read_s, record.timing.detect_s, record.timing.plan_s
@@ -196,10 +197,10 @@ class CentringLoop:
         if second is not None:
             action = second
             state.second_choices += 1
-            record.event = "second_choice"
+            record.event = StepEvent.SECOND_CHOICE
         if action.is_none and refine is None:
             state.stalls += 1
-            record.event = "stall"
+            record.event = StepEvent.STALL
             if state.stalls >= cfg.max_stalls:
                 return Outcome.PLANNER_STALLED
             self.vehicle.sleep(cfg.settle_s)
@@ -209,7 +210,7 @@ class CentringLoop:
             move = list(state.schedule.lengths_for(action, self._wanted_m(record, action)))
         if refine is not None:
             state.refinements += 1
-            record.event = "refinement"
+            record.event = StepEvent.REFINEMENT
             for axis, sign in enumerate(refine):
                 if sign:
                     move[axis] = sign * cfg.min_move_m
@@ -252,7 +253,7 @@ class CentringLoop:
     def _on_not_found(self, record: StepRecord, state: _RunState) -> Outcome | None:
         """The named target not seen yet in this run: hold and re-read (bounded), never move."""
         self.vehicle.hold()
-        record.event = "not_found"
+        record.event = StepEvent.NOT_FOUND
         if state.rereads < self.config.not_found_rereads:
             state.rereads += 1
             self.vehicle.sleep(self.config.settle_s)
@@ -263,7 +264,7 @@ class CentringLoop:
         """No detection: hold; re-read, then undo the last move once, then give up (bounded)."""
         cfg = self.config
         self.vehicle.hold()
-        record.event = "lost"
+        record.event = StepEvent.LOST
         if state.rereads < cfg.lost_rereads:
             state.rereads += 1
             self.vehicle.sleep(cfg.settle_s)
@@ -275,7 +276,7 @@ class CentringLoop:
             for axis, length in enumerate((right_m, up_m)):
                 if length:
                     state.schedule.shrink_axis(axis)
-            record.event, record.move_m = "recovery", (-right_m, -up_m)
+            record.event, record.move_m = StepEvent.RECOVERY, (-right_m, -up_m)
             record.move = self._fly(-right_m, -up_m)
             state.recoveries += 1
             state.decisions += 1

@@ -10,6 +10,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
 
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
 from controller.planning.actions import Action
 from controller.planning.grounding import TargetQuery
 from flight.moves import MoveResult
@@ -21,7 +23,8 @@ TruthProbe = Callable[[], "tuple[float, float] | None"]
 
 
 class Outcome(str, Enum):
-    """How a centring run ended."""
+    """How a centring run (or the mission around it) ended: the one outcome type of the loop, the
+    mission file's `expect.outcome`, reports and results. Its value is what files and JSON hold."""
 
     CENTRED = "centred"
     MAX_STEPS = "max_steps"
@@ -30,80 +33,81 @@ class Outcome(str, Enum):
     TARGET_NOT_FOUND = "target_not_found"  # the named target was never seen in this run
     PLANNER_STALLED = "planner_stalled"
     ABORTED = "aborted"  # an exception or Ctrl-C ended the flight (set by the caller)
+    ERROR = "error"  # the mission could not start (set by the caller)
+
+    def __str__(self) -> str:
+        return self.value
 
 
-@dataclass(frozen=True)
-class CentringConfig:
-    """Everything the loop needs to know besides its components. Lengths in metres, times in seconds."""
+class LoopSettings(BaseModel):
+    """How the loop moves and waits: the settings a mission file's `loop:` section sets (this type is
+    that section: one declaration for the file and the loop). Lengths in metres, times in seconds."""
 
-    epsilon_px: float
-    instruction: str = "center the gauge"
-    target: TargetQuery | None = None
-    """The target to centre among those detected; None: `parse_instruction(instruction)`."""
-    max_steps: int = 20
-    timeout_s: float = 120.0
-    move_m: float = 0.3
-    min_move_m: float = 0.05
-    shrink: float = 0.5
-    speed_m_s: float = 0.5
-    settle_s: float = 0.3
-    settle_speed_m_s: float = 0.08
-    settle_timeout_s: float = 4.0
-    frame_timeout_s: float = 5.0
-    fresh_frame_s: float = 0.0
-    """Observe only a frame that arrived this long (wall clock) after the observation began: a stream
-    (render, encode, transport) shows the vehicle as it was a little earlier, which a vehicle faster
-    than real time makes k times longer on its clock. 0: the newest frame since the last read."""
-    max_stalls: int = 3
-    lost_rereads: int = 2
-    lost_recoveries: int = 1
-    not_found_rereads: int = 3
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    move_m: float = Field(default=0.3, gt=0.0, le=2.0)
+    """Fixed scheme: the first move's length on an axis."""
+    min_move_m: float = Field(default=0.05, gt=0.0, le=2.0)
+    shrink: float = Field(default=0.5, gt=0.0, le=1.0)
+    """A reversal of direction on an axis multiplies its length (or cap) by this."""
+    speed_m_s: float = Field(default=0.5, gt=0.0, le=2.0)
+    settle_s: float = Field(default=0.3, ge=0.0, le=5.0)
+    settle_speed_m_s: float = Field(default=0.08, gt=0.0, le=1.0)
+    settle_timeout_s: float = Field(default=4.0, gt=0.0, le=60.0)
+    frame_timeout_s: float = Field(default=5.0, gt=0.0, le=60.0)
+    max_stalls: int = Field(default=3, ge=1, le=20)
+    lost_rereads: int = Field(default=2, ge=0, le=50)
+    lost_recoveries: int = Field(default=1, ge=0, le=5)
+    not_found_rereads: int = Field(default=3, ge=0, le=50)
     """Frames re-read, holding, while the named target has not been seen yet, before `target_not_found`."""
-    stop_margin_px: float | None = None
-    """Stop when the detector's offset is within ε − this on both axes; None: `default_stop_margin_px(W)`."""
-    max_refinements: int = 4
-    """Boundary refinement moves allowed per run (0: none; see the module docstring)."""
-    max_second_choices: int = 4
+    max_refinements: int = Field(default=4, ge=0, le=20)
+    """Boundary refinement moves allowed per run (0: none; see the module docstring of planning.loop)."""
+    max_second_choices: int = Field(default=4, ge=0, le=20)
     """Moves per run flown on the planner's best-ranked move after it chose "no move" far from centre
     (0: never; such a choice is then a stall; see the module docstring of planning.loop)."""
     scale_moves: bool = True
     """Scale each move with the detector's pixel offset (True) or the paper's fixed lengths (False)."""
-    max_move_m: float = 1.0
+    max_move_m: float = Field(default=1.0, gt=0.0, le=3.0)
     """Scaled scheme: the longest move on an axis (the cap, which shrinks on reversals)."""
-    move_gain: float = 0.8
-    assumed_distance_m: float = 2.0
+    move_gain: float = Field(default=0.8, gt=0.0, le=2.0)
+    assumed_distance_m: float = Field(default=2.0, gt=0.0, le=20.0)
     """Scaled scheme: the distance to the wall assumed to turn pixels into metres (not measured)."""
-    hfov_deg: float = 60.0
+    hfov_deg: float = Field(default=60.0, gt=0.0, lt=180.0)
     """Scaled scheme: the camera's horizontal field of view (the sim camera's; a real one's calibration)."""
 
-    def __post_init__(self) -> None:
-        if not self.epsilon_px > 0:
-            raise ValueError(f"epsilon_px must be > 0, got {self.epsilon_px}")
-        if not (0 < self.min_move_m <= self.move_m):
-            raise ValueError(f"need 0 < min_move_m <= move_m, got {self.min_move_m} and {self.move_m}")
+    @model_validator(mode="after")
+    def _move_lengths(self) -> LoopSettings:
+        if not self.min_move_m <= self.move_m:
+            raise ValueError(f"need min_move_m <= move_m, got {self.min_move_m} and {self.move_m}")
         if not self.min_move_m <= self.max_move_m:
             raise ValueError(f"need min_move_m <= max_move_m, got {self.min_move_m} and {self.max_move_m}")
-        if self.stop_margin_px is not None and not 0 <= self.stop_margin_px < self.epsilon_px:
+        return self
+
+
+class CentringConfig(LoopSettings):
+    """Everything one run of the loop needs besides its components: the settings, and this run's ε,
+    words, target and limits."""
+
+    epsilon_px: float = Field(gt=0.0)
+    instruction: str = "center the gauge"
+    target: TargetQuery | None = None
+    """The target to centre among those detected; None: `parse_instruction(instruction)`."""
+    max_steps: int = Field(default=20, ge=1)
+    timeout_s: float = Field(default=120.0, gt=0.0)
+    fresh_frame_s: float = Field(default=0.0, ge=0.0)
+    """Observe only a frame that arrived this long (wall clock) after the observation began: a stream
+    (render, encode, transport) shows the vehicle as it was a little earlier, which a vehicle faster
+    than real time makes k times longer on its clock. 0: the newest frame since the last read."""
+    stop_margin_px: float | None = Field(default=None, ge=0.0)
+    """Stop when the detector's offset is within ε − this on both axes; None: `default_stop_margin_px(W)`."""
+
+    @model_validator(mode="after")
+    def _margin_inside_epsilon(self) -> CentringConfig:
+        if self.stop_margin_px is not None and not self.stop_margin_px < self.epsilon_px:
             raise ValueError(
                 f"stop_margin_px must be in [0, epsilon_px={self.epsilon_px:g}), got {self.stop_margin_px}"
             )
-        if self.max_refinements < 0 or self.max_second_choices < 0:
-            raise ValueError("max_refinements and max_second_choices must be >= 0")
-        if not 0 < self.move_gain <= 2 or not 0 < self.hfov_deg < 180 or not self.assumed_distance_m > 0:
-            raise ValueError("need 0 < move_gain <= 2, 0 < hfov_deg < 180 and assumed_distance_m > 0")
-        if not 0 < self.shrink <= 1:
-            raise ValueError(f"shrink must be in (0, 1], got {self.shrink}")
-        if self.max_steps < 1 or self.max_stalls < 1 or self.lost_rereads < 0 or self.lost_recoveries < 0:
-            raise ValueError("max_steps and max_stalls must be >= 1, lost_rereads and lost_recoveries >= 0")
-        if self.not_found_rereads < 0:
-            raise ValueError(f"not_found_rereads must be >= 0, got {self.not_found_rereads}")
-        for name in ("timeout_s", "speed_m_s", "settle_speed_m_s", "settle_timeout_s", "frame_timeout_s"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        if self.fresh_frame_s < 0:
-            raise ValueError(f"fresh_frame_s must be >= 0, got {self.fresh_frame_s}")
-        if self.settle_s < 0:
-            raise ValueError(f"settle_s must be >= 0, got {self.settle_s}")
+        return self
 
 
 class MoveSchedule:
@@ -139,6 +143,24 @@ class MoveSchedule:
         self.length_m[axis] = max(self.min_move_m, self.length_m[axis] * self.shrink)
 
 
+class StepEvent(str, Enum):
+    """What happened at a step besides a plain planner move (its value is what reports hold)."""
+
+    MOVE = ""
+    CENTRED = "centred"
+    LOST = "lost"
+    NOT_FOUND = "not_found"
+    RECOVERY = "recovery"
+    REFINEMENT = "refinement"
+    SECOND_CHOICE = "second_choice"
+    STALL = "stall"
+    MAX_STEPS = "max_steps"
+    TIMEOUT = "timeout"
+
+    def __str__(self) -> str:
+        return self.value
+
+
 @dataclass(frozen=True)
 class StepTiming:
     """Wall-clock seconds spent in each part of a step; `overhead_s` is everything but the move."""
@@ -170,9 +192,7 @@ class StepRecord:
     distances: tuple[float, ...] | None = None
     move_m: tuple[float, float] | None = None  # commanded (right_m, up_m)
     move: MoveResult | None = None
-    event: str = ""
-    """"", "centred", "lost", "not_found", "recovery", "refinement", "second_choice", "stall", "max_steps",
-    "timeout"."""
+    event: StepEvent = StepEvent.MOVE
     stop_threshold_px: float | None = None  # ε − the stopping margin: what `centred` was tested against
     detections: tuple[Detection, ...] = ()  # everything the detector saw, strongest first
     timing: StepTiming = field(default_factory=lambda: StepTiming(0.0, 0.0, 0.0, 0.0, 0.0))
@@ -202,9 +222,9 @@ class CentringResult:
 
 def count_second_choices(steps: list[StepRecord]) -> int:
     """How many moves `steps` flew on the planner's second choice (after a "no move" far from centre)."""
-    return sum(1 for s in steps if s.event == "second_choice")
+    return sum(1 for s in steps if s.event is StepEvent.SECOND_CHOICE)
 
 
 def count_refinements(steps: list[StepRecord]) -> int:
     """How many boundary refinement moves `steps` contain."""
-    return sum(1 for s in steps if s.event == "refinement")
+    return sum(1 for s in steps if s.event is StepEvent.REFINEMENT)

@@ -18,7 +18,7 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Literal, Protocol
 
 import numpy as np
 
@@ -171,6 +171,51 @@ class OraclePlanner:
         return Plan(label_from_offset(offset[0], offset[1], observation.epsilon_px))
 
 
+@dataclass(frozen=True)
+class PlannerOptions:
+    """What building a planner may use: a checkpoint, a seed, simulator truth, a deadband."""
+
+    checkpoint: str | Path | None = None
+    seed: int = 0
+    truth_offset: TruthOffset | None = None
+    deadband_px: float | None = None
+
+
+@dataclass(frozen=True)
+class PlannerKind:
+    """One planner in the registry: its name, what it is, whether it needs simulator truth, a builder."""
+
+    name: str
+    summary: str
+    build: Callable[[PlannerOptions], Planner]
+    needs_truth: bool = False
+
+
+def _oracle(options: PlannerOptions) -> Planner:
+    if options.truth_offset is None:
+        raise ValueError("the oracle planner needs simulator truth, which this vehicle does not provide")
+    return OraclePlanner(options.truth_offset)
+
+
+PLANNERS: dict[str, PlannerKind] = {
+    kind.name: kind
+    for kind in (
+        PlannerKind(
+            "latent", "the paper's latent dynamics model", lambda o: LatentPlannerAdapter(o.checkpoint)
+        ),
+        PlannerKind(
+            "classic", "the detector's offset with a deadband", lambda o: ClassicPlanner(o.deadband_px)
+        ),
+        PlannerKind("random", "a seeded random move (a baseline)", lambda o: RandomPlanner(o.seed)),
+        PlannerKind("oracle", "the labelling rule on simulator truth (judging)", _oracle, needs_truth=True),
+    )
+}
+"""The one registry of planners: mission files, the command line and benchmarks take their names from it."""
+PLANNER_NAMES: tuple[str, ...] = tuple(PLANNERS)
+PlannerName = Literal[PLANNER_NAMES]  # type: ignore[valid-type]
+"""A planner's name, as a type (for validated config models)."""
+
+
 def make_planner(
     name: str,
     *,
@@ -179,15 +224,8 @@ def make_planner(
     truth_offset: TruthOffset | None = None,
     deadband_px: float | None = None,
 ) -> Planner:
-    """Build a planner by name (`latent`, `classic`, `random`, `oracle`)."""
-    if name == "latent":
-        return LatentPlannerAdapter(checkpoint)
-    if name == "classic":
-        return ClassicPlanner(deadband_px)
-    if name == "random":
-        return RandomPlanner(seed)
-    if name == "oracle":
-        if truth_offset is None:
-            raise ValueError("the oracle planner needs simulator truth, which this vehicle does not provide")
-        return OraclePlanner(truth_offset)
-    raise ValueError(f"unknown planner {name!r}: choose latent, classic, random or oracle")
+    """Build a planner by name (one of `PLANNER_NAMES`)."""
+    kind = PLANNERS.get(name)
+    if kind is None:
+        raise ValueError(f"unknown planner {name!r}: choose one of {', '.join(PLANNER_NAMES)}")
+    return kind.build(PlannerOptions(checkpoint, seed, truth_offset, deadband_px))

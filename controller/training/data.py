@@ -34,7 +34,7 @@ class TargetRef:
 
     kind: str
     attribute: str | None
-    """Its trim colour's name (drone_inspect_core.targets), None where the manifest does not say."""
+    """Its trim colour's name (drone_inspect_core.vocabulary), None where the manifest does not say."""
     offset_px: tuple[float, float]
     in_view: bool
 

@@ -12,15 +12,15 @@ from importlib import resources
 from pathlib import Path
 
 from controller.planning.latent.errors import InstructionError
+from drone_inspect_core.vocabulary import shipped_vocabulary
 
-TARGET_NOUNS: dict[str, str] = {"gauge": "gauge", "valve": "valve", "switchbox": "switch box"}
 CORPORA: tuple[str, ...] = ("fixed", "train", "heldout")
 SLOT = "{target}"
 
 
 def target_noun(target_kind: str) -> str:
-    """The spoken name of a dataset `target_kind` (unknown kinds are spoken as written)."""
-    return TARGET_NOUNS.get(target_kind, target_kind.replace("_", " "))
+    """The spoken name of a dataset `target_kind` (the vocabulary's noun; unknown kinds as written)."""
+    return shipped_vocabulary().noun(target_kind)
 
 
 def read_templates(path: Path) -> list[str]:
@@ -57,4 +57,4 @@ def tokenizer_corpus() -> list[str]:
     model as sub-word pieces learned in training, as real unseen phrasing would.
     """
     templates = builtin_templates("fixed") + builtin_templates("train")
-    return [fill(t, kind) for kind in TARGET_NOUNS for t in templates]
+    return [fill(t, kind) for kind in shipped_vocabulary().kind_names for t in templates]

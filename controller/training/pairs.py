@@ -25,7 +25,7 @@ import torch
 from controller.planning.latent.tokenizer import InstructionTokenizer
 from controller.training.data import TargetRef
 from controller.training.phrasing import COLOURS, TargetName, phrasing_table, synonyms
-from drone_inspect_core.targets import TARGET_KINDS
+from drone_inspect_core.vocabulary import shipped_vocabulary
 
 NAMED_FRACTION = 0.5
 """Share of present samples that ask for the image's named target (the rest: any target in view)."""
@@ -59,7 +59,7 @@ def named_target_name(refs: Sequence[TargetRef], with_colour: bool) -> TargetNam
 def absent_names(targets: Sequence[TargetRef]) -> list[TargetName]:
     """Names that match no target of the scene: a kind none has, or a kind with a colour none of it has."""
     kinds = {t.kind for t in targets}
-    names = [TargetName(k) for k in TARGET_KINDS if k not in kinds]
+    names = [TargetName(k) for k in shipped_vocabulary().kind_names if k not in kinds]
     for kind in sorted(kinds):
         colours = {t.attribute for t in targets if t.kind == kind}
         if None in colours:

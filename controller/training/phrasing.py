@@ -24,26 +24,13 @@ from pathlib import Path
 import numpy as np
 
 from controller.planning.latent.errors import InstructionError
-from drone_inspect_core.targets import ATTRIBUTE_COLOURS, TARGET_KINDS
+from drone_inspect_core.vocabulary import VocabularyError, shipped_vocabulary
 
 SLOT = "{target}"
+CORPORA: tuple[str, ...] = ("fixed", "train", "heldout")
+"""Word sets of the vocabulary (`drone_inspect_core.vocabulary`): `heldout` never reaches training."""
 
-SYNONYMS: dict[str, dict[str, tuple[str, ...]]] = {
-    "fixed": {"gauge": ("gauge",), "valve": ("valve",), "switchbox": ("switch box",)},
-    "train": {
-        "gauge": ("gauge", "pressure gauge", "dial"),
-        "valve": ("valve", "handwheel", "wheel valve"),
-        "switchbox": ("switch box", "electrical box", "control panel"),
-    },
-    "heldout": {
-        "gauge": ("pressure dial", "dial gauge"),
-        "valve": ("valve wheel", "valve handwheel"),
-        "switchbox": ("electrical panel", "control box"),
-    },
-}
-"""Noun phrases per kind and corpus; `heldout` never reaches training."""
-
-COLOURS: tuple[str, ...] = tuple(ATTRIBUTE_COLOURS)
+COLOURS: tuple[str, ...] = shipped_vocabulary().colour_names
 
 
 @dataclass(frozen=True)
@@ -65,16 +52,17 @@ def fill_phrase(template: str, phrase: str) -> str:
 
 
 def synonyms(kind: str, corpus: str) -> tuple[str, ...]:
-    """The synonyms of `kind` in `corpus` ("fixed", "train" or "heldout")."""
-    try:
-        table = SYNONYMS[corpus]
-    except KeyError:
-        raise InstructionError(
-            f"unknown synonym corpus {corpus!r}; choose one of {sorted(SYNONYMS)}"
-        ) from None
-    if kind not in table:
+    """The synonyms of `kind` in `corpus` ("fixed", "train" or "heldout"); an unknown kind is spoken as
+    its name."""
+    if corpus not in CORPORA:
+        raise InstructionError(f"unknown synonym corpus {corpus!r}; choose one of {list(CORPORA)}")
+    kind_data = shipped_vocabulary().kinds.get(kind)
+    if kind_data is None:
         return (kind.replace("_", " "),)
-    return table[kind]
+    try:
+        return kind_data.synonyms(corpus)
+    except VocabularyError as exc:
+        raise InstructionError(str(exc)) from None
 
 
 def describe(name: TargetName, templates: Sequence[str], corpus: str, rng: np.random.Generator) -> str:
@@ -93,7 +81,7 @@ def phrasing_table(templates: Sequence[str], corpus: str) -> list[tuple[PhraseKe
 
     The described model's tokenizer corpus, and the table its training sampler draws from."""
     out = []
-    for kind in TARGET_KINDS:
+    for kind in shipped_vocabulary().kind_names:
         for s, synonym in enumerate(synonyms(kind, corpus)):
             for attribute in (None, *COLOURS):
                 phrase = noun_phrase(TargetName(kind, attribute), synonym)
@@ -129,10 +117,9 @@ def read_kind_phrases(path: Path) -> dict[str, list[str]]:
         if match is None:
             raise InstructionError(f"{path}:{number}: expected 'kind: phrase', got {line.strip()!r}")
         kind = match.group(1).strip().replace(" ", "").lower()
-        if kind not in TARGET_KINDS:
-            raise InstructionError(
-                f"{path}:{number}: unknown target kind {match.group(1)!r}; use {TARGET_KINDS}"
-            )
+        known = shipped_vocabulary().kind_names
+        if kind not in known:
+            raise InstructionError(f"{path}:{number}: unknown target kind {match.group(1)!r}; use {known}")
         phrases.setdefault(kind, []).append(match.group(2))
     if not phrases:
         raise InstructionError(f"instruction file {path} holds no 'kind: phrase' lines")
@@ -148,5 +135,6 @@ def is_kind_phrase_file(path: Path) -> bool:
     for line in lines:
         if line.strip() and not line.lstrip().startswith("#"):
             match = _KIND_LINE.match(line)
-            return bool(match) and match.group(1).strip().replace(" ", "").lower() in TARGET_KINDS
+            kind = match.group(1).strip().replace(" ", "").lower() if match else None
+            return kind in shipped_vocabulary().kind_names
     return False

@@ -22,18 +22,16 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-import pybullet as p
 from pymavlink.dialects.v20 import common as mavlink
 
-from drone_inspect_core.frames import enu_to_ned
 from sim_world.px4_bridge.geodesy import HomePoint
 from sim_world.px4_bridge.link import Px4DisconnectedError, SimulatorServer
 from sim_world.px4_bridge.messages import ActuatorCommand, HilEncoder, RotorMapping
 from sim_world.px4_bridge.sensors import SensorSuite, Truth
+from sim_world.sitl.rig import CameraClock, TruthReader
 from sim_world.vehicle.telemetry import distance_sensor_message
 from sim_world.world import World
 
@@ -43,8 +41,6 @@ PX4_CLOCK_OFFSET_US = 20_000_000
 """PX4's clock = simulated time + 20 s. Started near 0, PX4's first integrated IMU sample spans
 everything since 0 and EKF2 began with ~1.8 m/s of vertical velocity on a vehicle at rest
 (its height then settled 0.5-1 m off); Gazebo's world clock is well past 0 when PX4 connects."""
-_ENU_TO_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-_FRD_TO_FLU = np.diag([1.0, -1.0, -1.0])
 
 
 @dataclass(frozen=True)
@@ -94,21 +90,6 @@ class BridgeStats:
         return self.sim_s / self.wall_s if self.wall_s > 0 else 0.0
 
 
-class CameraClock:
-    """What the bridge needs of a camera: take the pose for a frame (the video feed's `capture`)."""
-
-    def __init__(self, capture: Callable[[], None], fps: float) -> None:
-        self._capture, self._period = capture, 1.0 / fps
-        self._next_s = 0.0
-        self.frames = 0
-
-    def tick(self, sim_s: float) -> None:
-        if sim_s + 1e-9 >= self._next_s:
-            self._capture()
-            self.frames += 1
-            self._next_s = max(self._next_s + self._period, sim_s)
-
-
 class Px4Bridge:
     """The world behind PX4's simulator link. `run()` blocks until `stop` is set or PX4 goes away."""
 
@@ -137,7 +118,7 @@ class Px4Bridge:
         self._time_usec = 0
         self._command: ActuatorCommand | None = None
         self._last_heard = time.monotonic()
-        self._velocity_ned = self._truth_velocity()
+        self._truth_reader = TruthReader(world, self.origin_enu_m, self.timing.sensor_period_s)
         self.last_truth: Truth | None = None
         self._stats = BridgeStats()
         self._stats_lock = threading.Lock()
@@ -179,7 +160,7 @@ class Px4Bridge:
         """One sensor period: sensors out, PX4's answer in, physics one tick."""
         timing, world = self.timing, self.world
         tick = self._stats.ticks
-        truth = self.last_truth = self._truth()
+        truth = self.last_truth = self._truth_reader.read()
         self._time_usec = round(world.time_s * 1e6) + PX4_CLOCK_OFFSET_US
         imu = self.sensors.imu(truth)
         mag = self.sensors.mag(truth) if tick % timing.mag_every == 0 else None
@@ -246,24 +227,3 @@ class Px4Bridge:
                     self._stats.late_answers += 1
                     log.warning("no PX4 answer for t=%d us within %.1f s: stepping on", time_usec, wait_s)
                 return
-
-    # -------------------------------------------------------------------- truth
-    def _truth_velocity(self) -> np.ndarray:
-        return enu_to_ned(self.world.state().velocity_enu_m_s)
-
-    def _truth(self) -> Truth:
-        world = self.world
-        state = world.state()
-        velocity = enu_to_ned(state.velocity_enu_m_s)
-        acceleration = (velocity - self._velocity_ned) / self.timing.sensor_period_s
-        self._velocity_ned = velocity
-        r_enu_flu = np.array(p.getMatrixFromQuaternion(state.quaternion_xyzw.tolist())).reshape(3, 3)
-        rates = state.angular_velocity_flu_rad_s
-        return Truth(
-            time_s=world.time_s,
-            position_ned_m=enu_to_ned(state.position_enu_m - self.origin_enu_m),
-            velocity_ned_m_s=velocity,
-            acceleration_ned_m_s2=acceleration,
-            rotation_ned_frd=_ENU_TO_NED @ r_enu_flu @ _FRD_TO_FLU,
-            rates_frd_rad_s=np.array([rates[0], -rates[1], -rates[2]]),
-        )

@@ -21,6 +21,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from sim_world.px4_bridge.sensors import BaroReading, GpsReading, ImuReading, Truth
+from sim_world.sitl.rig import quaternion_wxyz
 
 ACCEL_BITS = 0b111
 GYRO_BITS = 0b111 << 3
@@ -70,27 +71,6 @@ class RotorMapping:
             return [0.0, 0.0, 0.0, 0.0]
         span = self.max_rad_s - self.idle_rad_s
         return [self.idle_rad_s + u * span for u in command.motors]
-
-
-def quaternion_wxyz(rotation: np.ndarray) -> list[float]:
-    """A rotation matrix as a unit quaternion (w, x, y, z), MAVLink's order."""
-    m = rotation
-    trace = m[0, 0] + m[1, 1] + m[2, 2]
-    if trace > 0.0:
-        s = 2.0 * math.sqrt(trace + 1.0)
-        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
-    else:
-        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
-    if q[0] < 0.0:
-        q = [-v for v in q]
-    return [float(v) for v in q]
 
 
 class HilEncoder:

@@ -20,8 +20,6 @@ Per run, PX4 gets:
 
 from __future__ import annotations
 
-import ctypes
-import errno
 import fcntl
 import logging
 import os
@@ -29,11 +27,12 @@ import shutil
 import signal
 import subprocess
 import tempfile
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO
+
+from sim_world.sitl.children import InstanceBusyError, find_sitl_dir, instance_lock, set_parent_death_signal
 
 log = logging.getLogger(__name__)
 
@@ -41,7 +40,6 @@ PX4_DIR_ENV = "PX4_SITL_DIR"
 AIRFRAME_ID = 10016  # none_iris: a quad X waiting for an external simulator
 AIRFRAME_MODEL = "none_iris"
 MAX_INSTANCE = 9  # PX4 gives instances above 9 the same offboard port (14549)
-_PR_SET_PDEATHSIG = 1
 
 
 class Px4FolderError(ValueError):
@@ -57,25 +55,10 @@ def find_px4_dir(explicit: str | Path | None, fallbacks: tuple[Path, ...] = ()) 
 
     Raises `Px4FolderError` naming where it looked when none is a PX4 SITL build.
     """
-    candidates: list[tuple[str, Path]] = []
-    if explicit is not None:
-        candidates.append(("--px4", Path(explicit)))
-    elif os.environ.get(PX4_DIR_ENV):
-        candidates.append((f"${PX4_DIR_ENV}", Path(os.environ[PX4_DIR_ENV])))
-    else:
-        candidates += [("default", path) for path in fallbacks]
-    if not candidates:
-        raise Px4FolderError(
-            f"no PX4 SITL folder given: pass --px4 DIR or set {PX4_DIR_ENV} to a PX4 SITL build folder "
-            "(PX4-Autopilot/build/px4_sitl_default after `make px4_sitl_default`)"
-        )
-    problems = []
-    for source, path in candidates:
-        try:
-            return check_px4_dir(path)
-        except Px4FolderError as exc:
-            problems.append(f"{source}: {exc}")
-    raise Px4FolderError("; ".join(problems))
+    return find_sitl_dir(
+        explicit, PX4_DIR_ENV, fallbacks, check_px4_dir, "--px4", Px4FolderError,
+        "a PX4 SITL build folder: PX4-Autopilot/build/px4_sitl_default after `make px4_sitl_default`",
+    )  # fmt: skip
 
 
 def check_px4_dir(path: Path) -> Path:
@@ -123,15 +106,6 @@ def speed_scaled_timeouts(speed_factor: float | None) -> dict[str, float]:
     if speed_factor is None or speed_factor <= 1.0:
         return {}
     return {name: round(value * speed_factor, 3) for name, value in LINK_LOSS_TIMEOUTS_S.items()}
-
-
-def _set_parent_death_signal() -> None:
-    """In the child before exec: SIGTERM when the parent dies (Linux; a no-op elsewhere)."""
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
-    except (OSError, AttributeError):
-        pass
 
 
 @dataclass(frozen=True)
@@ -199,7 +173,7 @@ class Px4Process:
             stdin=subprocess.DEVNULL,
             stdout=self._log_file,
             stderr=subprocess.STDOUT,
-            preexec_fn=_set_parent_death_signal,
+            preexec_fn=set_parent_death_signal,
         )
         return self
 
@@ -280,34 +254,13 @@ class Px4Process:
         self.close()
 
 
-class Px4InstanceBusyError(RuntimeError):
+class Px4InstanceBusyError(InstanceBusyError):
     """The PX4 instance asked for (or every instance, for `auto`) is held by another run."""
 
 
-@contextmanager
-def px4_instance(wanted: int | str) -> Iterator[int]:
+def px4_instance(wanted: int | str) -> AbstractContextManager[int]:
     """Hold a PX4 instance number for the block: a lock file per instance, released on any exit."""
-    folder = Path(tempfile.gettempdir())
-    candidates = range(MAX_INSTANCE + 1) if wanted == "auto" else [int(wanted)]
-    for n in candidates:
-        if wanted == "auto" and _px4_running(n):
-            continue
-        handle: IO[bytes] = (folder / f"drone-inspect-px4-{n}.lock").open("ab")
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError as exc:
-            handle.close()
-            if exc.errno in (errno.EAGAIN, errno.EACCES):
-                continue
-            raise
-        try:
-            yield n
-        finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
-            handle.close()
-        return
-    which = "every PX4 instance (0..9)" if wanted == "auto" else f"PX4 instance {wanted}"
-    raise Px4InstanceBusyError(f"{which} is in use by another run on this machine")
+    return instance_lock("px4", wanted, MAX_INSTANCE, _px4_running, Px4InstanceBusyError)
 
 
 def _px4_running(instance: int) -> bool:

@@ -17,7 +17,6 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
-from sim_world.physics.quadrotor import QuadrotorParams
 from sim_world.physics.wind import WindConfig
 from sim_world.process_entry import say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
@@ -31,15 +30,15 @@ from sim_world.px4_bridge.link import (
 )
 from sim_world.px4_bridge.px4_process import MAX_INSTANCE, Px4Options, Px4Process, Px4StartError
 from sim_world.px4_bridge.sensors import SensorNoise, SensorSuite
-from sim_world.rendering.camera import CameraConfig
 from sim_world.rendering.video import VideoConfig, VideoError, VideoFaults, WorldVideoFeed
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfig, parse_scene_config
+from sim_world.sitl.rig import SITL_QUAD, build_sitl_world
 from sim_world.vehicle.serve import StartPose
-from sim_world.world import World, WorldConfig, derived_seed
+from sim_world.world import World, derived_seed
 
 log = logging.getLogger(__name__)
 
-PX4_QUAD = QuadrotorParams(landing_gear_stiffness_n_m=3000.0)
+PX4_QUAD = SITL_QUAD
 """The project's quadrotor with compliant landing legs (3 mm static deflection, damped)."""
 PHYSICS_HZ = 500.0  # two physics steps per 4 ms sensor tick
 OFFBOARD_PORT_BASE = 14540
@@ -114,19 +113,9 @@ class Px4SimReady:
 
 def build_px4_world(config: Px4SimConfig) -> World:
     """The world with the drone landed below the start pose (or at the default start)."""
-    camera = CameraConfig(width=config.image_size_px, height=config.image_size_px)
-    world = World(
-        WorldConfig(
-            scene=config.scene, camera=camera, drone=PX4_QUAD, physics_hz=PHYSICS_HZ, wind=config.wind
-        ),
-        seed=config.seed,
+    return build_sitl_world(
+        config.scene, config.seed, config.image_size_px, PHYSICS_HZ, config.wind, config.start_offset
     )
-    if config.start_offset is not None:
-        o = config.start_offset
-        position, yaw_enu = world.scene.pose_for_offset(o.right_m, o.up_m, o.distance_m, o.yaw_deg)
-        world.drone.set_pose((float(position[0]), float(position[1]), world.drone.resting_height_m), yaw_enu)
-    world.drone.stop_rotors()
-    return world
 
 
 def run_px4_sim(

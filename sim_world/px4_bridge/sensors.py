@@ -15,62 +15,16 @@ units of HIL_SENSOR and HIL_GPS (m/s², rad/s, gauss, hPa, °C, degrees, metres)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from sim_world.px4_bridge.geodesy import HomePoint, MagneticField, pressure_hpa, temperature_c
+from sim_world.sitl.imu import GRAVITY_NED_M_S2, ImuModel, ImuReading, SensorNoise, Truth
 
-GRAVITY_NED_M_S2 = np.array([0.0, 0.0, 9.80665])
-
-
-@dataclass(frozen=True)
-class SensorNoise:
-    """Noise, bias and drift of each sensor (1-sigma values)."""
-
-    accel_noise_density: float = 0.002  # m/s²/√Hz (≈ 0.03 m/s² per sample at 250 Hz)
-    accel_bias_m_s2: float = 0.02  # power-on bias
-    accel_bias_walk: float = 0.0004  # m/s² per √s
-    gyro_noise_density: float = 0.0002  # rad/s/√Hz (≈ 0.003 rad/s per sample at 250 Hz)
-    gyro_bias_rad_s: float = 0.002
-    gyro_bias_walk: float = 0.00004  # rad/s per √s
-    mag_noise_gauss: float = 0.002  # per sample
-    mag_bias_gauss: float = 0.005  # residual hard-iron offset after calibration
-    baro_noise_m: float = 0.08  # per sample, as altitude
-    baro_drift_m: float = 0.15  # slow drift (Gauss-Markov, below)
-    baro_drift_time_s: float = 120.0
-    gps_position_noise_m: float = 0.02  # white, per fix
-    gps_position_drift_m: float = 0.08  # slow horizontal wander (Gauss-Markov)
-    gps_altitude_drift_m: float = 0.15
-    gps_drift_time_s: float = 60.0
-    gps_velocity_noise_m_s: float = 0.02
-
-    def scaled(self, factor: float) -> SensorNoise:
-        """All sigmas × factor (0: perfect sensors; time constants unchanged)."""
-        if not factor >= 0.0:
-            raise ValueError(f"noise scale must be >= 0, got {factor}")
-        return replace(
-            self,
-            **{f.name: getattr(self, f.name) * factor for f in fields(self) if not f.name.endswith("time_s")},
-        )
-
-
-@dataclass(frozen=True)
-class Truth:
-    """The simulator's state at one instant, in PX4's frames, relative to home."""
-
-    time_s: float
-    position_ned_m: np.ndarray  # (3,)
-    velocity_ned_m_s: np.ndarray  # (3,)
-    acceleration_ned_m_s2: np.ndarray  # (3,) kinematic, gravity not included
-    rotation_ned_frd: np.ndarray  # (3, 3) body FRD vectors to NED
-    rates_frd_rad_s: np.ndarray  # (3,)
-
-
-@dataclass(frozen=True)
-class ImuReading:
-    accel_frd_m_s2: np.ndarray
-    gyro_frd_rad_s: np.ndarray
+__all__ = [
+    "GRAVITY_NED_M_S2", "BaroReading", "GpsReading", "ImuReading", "SensorNoise", "SensorSuite", "Truth",
+]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -113,32 +67,18 @@ class SensorSuite:
     def __init__(self, home: HomePoint, field: MagneticField, noise: SensorNoise, seed: int) -> None:
         self.home, self.field, self.noise = home, field, noise
         rng = self._rng = np.random.default_rng(seed)
-        self._accel_bias = rng.normal(0.0, noise.accel_bias_m_s2, 3) if noise.accel_bias_m_s2 else np.zeros(3)
-        self._gyro_bias = rng.normal(0.0, noise.gyro_bias_rad_s, 3) if noise.gyro_bias_rad_s else np.zeros(3)
+        self._imu = ImuModel(noise, rng, default_dt_s=0.004)  # draws the accelerometer and gyro biases first
         self._mag_bias = rng.normal(0.0, noise.mag_bias_gauss, 3) if noise.mag_bias_gauss else np.zeros(3)
         self._baro_drift = _GaussMarkov(rng, noise.baro_drift_m, noise.baro_drift_time_s, 1)
         self._gps_drift = _GaussMarkov(rng, 1.0, noise.gps_drift_time_s, 3)
         self._gps_sigma = np.array([noise.gps_position_drift_m] * 2 + [noise.gps_altitude_drift_m])
         self._field_ned = np.array(field.as_tuple())
-        self._last_imu_s: float | None = None
         self._last_gps_s: float | None = None
         self._last_baro_s: float | None = None
 
     def imu(self, truth: Truth) -> ImuReading:
         """Accelerometer (specific force) and gyro in body FRD."""
-        n = self.noise
-        dt = self._dt(truth.time_s, self._last_imu_s, 0.004)
-        self._last_imu_s = truth.time_s
-        rng = self._rng
-        if n.accel_bias_walk:
-            self._accel_bias = self._accel_bias + rng.normal(0.0, n.accel_bias_walk * math.sqrt(dt), 3)
-        if n.gyro_bias_walk:
-            self._gyro_bias = self._gyro_bias + rng.normal(0.0, n.gyro_bias_walk * math.sqrt(dt), 3)
-        body_from_ned = truth.rotation_ned_frd.T
-        specific_force = body_from_ned @ (truth.acceleration_ned_m_s2 - GRAVITY_NED_M_S2)
-        accel = specific_force + self._accel_bias + self._white(n.accel_noise_density / math.sqrt(dt))
-        gyro = truth.rates_frd_rad_s + self._gyro_bias + self._white(n.gyro_noise_density / math.sqrt(dt))
-        return ImuReading(accel, gyro)
+        return self._imu.read(truth)
 
     def mag(self, truth: Truth) -> np.ndarray:
         """The Earth's field in body FRD, gauss."""

@@ -22,7 +22,7 @@ import numpy as np
 import pybullet as p
 
 from drone_inspect_core.frames import wrap_rad
-from drone_inspect_core.targets import colour_name
+from drone_inspect_core.vocabulary import colour_name
 from sim_world.rendering.camera import Lighting
 from sim_world.scene.assets import AssetCache
 from sim_world.scene.bodies import BodyBuilder
@@ -40,10 +40,10 @@ class SceneTarget:
     """One inspection target as built: what an instruction calls it and where it is."""
 
     kind: str
-    """"gauge", "valve" or "switchbox" (`drone_inspect_core.targets.TARGET_KINDS`)."""
-    attribute: str
-    """The trim colour's name (`drone_inspect_core.targets.colour_name` of its bezel colour): "red",
-    "blue", ..."""
+    """The kind's name (`drone_inspect_core.vocabulary`): "gauge", "valve", "switchbox", or a scene's own."""
+    attribute: str | None
+    """The trim colour's name (`drone_inspect_core.vocabulary.colour_name` of its bezel colour): "red",
+    "blue", ...; None for a picture face, which has no trim."""
     body_id: int
     """The face only (dial + bezel, handwheel, door): what the segmentation mask counts."""
     centre_enu_m: np.ndarray
@@ -54,10 +54,10 @@ class SceneTarget:
     """Diameter (gauge, valve) or width (switch box) of the front face."""
 
     @classmethod
-    def of(cls, params: TargetParams, built: BuiltTarget) -> SceneTarget:
+    def of(cls, params: TargetParams, built: BuiltTarget, picture: bool = False) -> SceneTarget:
         return cls(
             kind=params.kind,
-            attribute=colour_name(params.bezel_colour),
+            attribute=None if picture else colour_name(params.bezel_colour),
             body_id=built.body_id,
             centre_enu_m=built.centre_enu_m,
             corners_enu_m=built.outline_enu_m,
@@ -101,7 +101,7 @@ class Scene:
         return 0
 
     @property
-    def target_attribute(self) -> str:
+    def target_attribute(self) -> str | None:
         """The named target's trim colour name ("red", "blue", ...)."""
         return self.targets[self.named_index].attribute
 
@@ -119,8 +119,9 @@ class Scene:
         north = wall.north_m
         wall_id = build_wall(builder, assets, params, north, wall.width_m, wall.height_m)
         floor_id, floor_collider_id = build_floor(builder, assets, params, north)
-        target = build_target(builder, assets, params.target, north)
-        others = tuple(build_target(builder, assets, t, north) for t in params.others)
+        vocabulary = config.vocabulary
+        target = build_target(builder, assets, params.target, north, vocabulary)
+        others = tuple(build_target(builder, assets, t, north, vocabulary) for t in params.others)
         mounts = tuple(build_item(builder, assets, item, north) for item in params.mounts)
         clutter = tuple(build_item(builder, assets, item, north) for item in params.clutter)
         distractors = tuple(build_item(builder, assets, item, north) for item in params.distractors)
@@ -162,7 +163,8 @@ class Scene:
             distractor_body_ids=distractors,
             other_body_ids=(floor_collider_id,),
             targets=tuple(
-                SceneTarget.of(t, b) for t, b in zip(params.targets, (target, *others), strict=True)
+                SceneTarget.of(t, b, vocabulary.kind(t.kind).face.image is not None)
+                for t, b in zip(params.targets, (target, *others), strict=True)
             ),
         )
 

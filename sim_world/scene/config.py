@@ -11,11 +11,10 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, Field, ValidationInfo, field_validator
+from pydantic import AfterValidator, Field, ValidationInfo, field_validator, model_validator
 
-from drone_inspect_core import targets as vocabulary
 from drone_inspect_core.config_files import (
     ConfigFileError,
     StrictModel,
@@ -23,16 +22,14 @@ from drone_inspect_core.config_files import (
     read_yaml,
     validate_mapping,
 )
+from drone_inspect_core.vocabulary import Vocabulary, shipped_vocabulary, validated_kinds, vocabulary_with
 
-TargetKind = Literal["gauge", "valve", "switchbox"]
 WallTexture = Literal["concrete", "brick", "painted_metal"]
 FloorTexture = Literal["concrete", "tiles", "grating"]
 DistractorKind = Literal["dial", "box", "sign"]
 
-TARGET_KINDS: tuple[TargetKind, ...] = ("gauge", "valve", "switchbox")
-assert TARGET_KINDS == vocabulary.TARGET_KINDS, (
-    "the scene's target kinds are drone_inspect_core.targets' vocabulary"
-)
+TARGET_KINDS: tuple[str, ...] = shipped_vocabulary().kind_names
+"""The shipped kinds (`drone_inspect_core.vocabulary`): the default choices of a scene's targets."""
 MAX_TARGETS = 4
 """The most targets one scene holds (all of them in view from the named target's centred pose)."""
 
@@ -74,10 +71,10 @@ class TargetConfig(StrictModel):
 
     The first target is the *named* one (what an instruction asks to centre); the others
     stand beside it. Targets of one kind always differ in their trim colour's name
-    (`drone_inspect_core.targets.colour_name` of `bezel_colours`), the attribute an instruction names.
+    (`drone_inspect_core.vocabulary.colour_name` of `bezel_colours`), the attribute an instruction names.
     """
 
-    kinds: tuple[TargetKind, ...] = Field(default=TARGET_KINDS, min_length=1)
+    kinds: tuple[str, ...] = Field(default=TARGET_KINDS, min_length=1)
     """Choices for the named target's kind."""
     size_m: Range = (0.26, 0.40)
     """Gauge and handwheel diameter, switch-box width."""
@@ -95,14 +92,13 @@ class TargetConfig(StrictModel):
     """Gauge bezel ring / case, handwheel hub and switch-box door frame colours."""
     needle_fraction: Range = (0.1, 0.9)
     """Gauge reading as a fraction of full scale."""
-    other_kinds: tuple[TargetKind, ...] = Field(default=TARGET_KINDS, min_length=1)
+    other_kinds: tuple[str, ...] = Field(default=TARGET_KINDS, min_length=1)
     """Choices for the other targets' kinds (kinds not yet on the wall are preferred)."""
     twins: bool = False
     """With 2 or more targets: one other target has the named target's kind, in another trim colour."""
     attribute: str | None = None
-    """The named target's trim colour name (`drone_inspect_core.targets.ATTRIBUTE_COLOURS`): its trim is
-    drawn from
-    the `bezel_colours` of that name (that colour itself if none has it); None: from all of them."""
+    """The named target's trim colour name (`drone_inspect_core.vocabulary`): its trim is drawn from the
+    `bezel_colours` of that name (that colour itself if none has it); None: from all of them."""
     count: IntRange = (1, 1)
     """How many targets on the wall (named one included), 1..4. Last, so that its check sees the rest."""
 
@@ -118,7 +114,7 @@ class TargetConfig(StrictModel):
         _within(value, 1, MAX_TARGETS)
         if not {"kinds", "other_kinds", "twins", "bezel_colours"} <= info.data.keys():
             return value  # another field is already refused
-        names = len({vocabulary.colour_name(c) for c in info.data["bezel_colours"]})
+        names = len({shipped_vocabulary().colour_name(c) for c in info.data["bezel_colours"]})
         twins = info.data["twins"]
         if twins and value[1] >= 2 and names < 2:
             raise ValueError("twins need at least 2 bezel_colours with different colour names")
@@ -135,18 +131,18 @@ class TargetConfig(StrictModel):
     @field_validator("attribute")
     @classmethod
     def _attribute_name(cls, value: str | None) -> str | None:
-        if value is not None and value not in vocabulary.ATTRIBUTE_COLOURS:
-            raise ValueError(
-                f"must be one of {', '.join(vocabulary.ATTRIBUTE_COLOURS)} or null, got {value!r}"
-            )
+        colours = shipped_vocabulary().colour_names
+        if value is not None and value not in colours:
+            raise ValueError(f"must be one of {', '.join(colours)} or null, got {value!r}")
         return value
 
     def named_bezel_colours(self) -> tuple[str, ...]:
         """The trim colours the named target is drawn from (see `attribute`)."""
         if self.attribute is None:
             return self.bezel_colours
+        vocabulary = shipped_vocabulary()
         named = tuple(c for c in self.bezel_colours if vocabulary.colour_name(c) == self.attribute)
-        return named or ("#{:02x}{:02x}{:02x}".format(*vocabulary.ATTRIBUTE_COLOURS[self.attribute]),)
+        return named or (vocabulary.colour_hex(self.attribute),)
 
     @field_validator("size_m")
     @classmethod
@@ -233,6 +229,10 @@ class LightingConfig(StrictModel):
 class SceneConfig(StrictModel):
     """Everything `Scene.build` randomises, as ranges; a seed picks one scene."""
 
+    kinds: dict[str, dict[str, Any]] = Field(default_factory=dict)
+    """Target kinds this scene adds to the shipped ones (`drone_inspect_core.vocabulary.parse_kind`):
+    `{flange: {image: flange.png, size_m: [0.3, 0.3], words: [flange, pipe flange]}}`; an image's
+    path is relative to the scene file. First, so that `target` can name them."""
     target: TargetConfig = TargetConfig()
     wall: WallConfig = WallConfig()
     floor: FloorConfig = FloorConfig()
@@ -246,14 +246,47 @@ class SceneConfig(StrictModel):
     def _noise(cls, value: tuple[float, float]) -> tuple[float, float]:
         return _within(value, 0.0, 64.0)
 
+    @field_validator("kinds", mode="before")
+    @classmethod
+    def _parse_kinds(cls, value: object, info: ValidationInfo) -> object:
+        """Each kind checked (its image readable, its words free); stored as plain data, paths absolute."""
+        return validated_kinds(value, (info.context or {}).get("base_dir"))
+
+    @model_validator(mode="after")
+    def _known_kinds(self) -> SceneConfig:
+        known = self.vocabulary.kind_names
+        for field in ("kinds", "other_kinds"):
+            for index, name in enumerate(getattr(self.target, field)):
+                if name not in known:
+                    raise ValueError(
+                        f"target.{field}[{index}]: unknown target kind {name!r}; "
+                        f"known kinds: {', '.join(known)} (add one under `kinds:`)"
+                    )
+        return self
+
+    @property
+    def vocabulary(self) -> Vocabulary:
+        """The shipped vocabulary with this scene's own kinds."""
+        return vocabulary_with(self.kinds)
+
 
 DEFAULT_SCENE = SceneConfig()
 """The default family of scenes (the same as `scenes/default.yaml`)."""
 
 
-def parse_scene_config(data: object, source: str | Path = "<scene config>") -> SceneConfig:
-    """Validate an already-parsed mapping (empty means the defaults); errors name `source` and the field."""
-    return validate_mapping(SceneConfig, {} if data is None else data, source, SceneConfigError)
+def parse_scene_config(
+    data: object, source: str | Path = "<scene config>", base_dir: Path | None = None
+) -> SceneConfig:
+    """Validate an already-parsed mapping (empty means the defaults); errors name `source` and the field.
+
+    `base_dir`: where a kind's image path is relative to (default: the folder of `source` if it is a file).
+    """
+    if base_dir is None and isinstance(source, Path):
+        base_dir = source.parent
+    context = {"base_dir": base_dir}
+    return validate_mapping(
+        SceneConfig, {} if data is None else data, source, SceneConfigError, context=context
+    )
 
 
 def with_targets(
@@ -282,4 +315,4 @@ def load_scene_config(path: str | Path) -> SceneConfig:
     missing or unreadable file, a YAML syntax error, or a value that fails validation.
     """
     data = read_yaml(path, SceneConfigError)
-    return parse_scene_config(data, path)
+    return parse_scene_config(data, Path(path))

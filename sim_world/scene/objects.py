@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from drone_inspect_core.vocabulary import Vocabulary
 from sim_world.scene.assets import AssetCache
 from sim_world.scene.bodies import ALONG_X, ALONG_Y, ALONG_Z, BodyBuilder, Part, along_xz, shaded
 from sim_world.scene.config import hex_to_rgb
@@ -25,15 +27,19 @@ from sim_world.scene.sampling import (
     TargetParams,
     WallItem,
 )
+from sim_world.scene.sampling_targets import IMAGE_PANEL_STANDOFF_M
 from sim_world.scene.textures import FLOOR_TILE_M, WALL_TILE_M, floor_texture, wall_texture
 from sim_world.scene.textures_targets import (
     gauge_dial,
     instrument_dial,
+    picture_texture,
     round_sign,
     switchbox_panel,
     wall_sign,
 )
 
+PICTURE_WIDTH_PX = 256
+"""A picture face's texture width (its height follows the panel's aspect)."""
 OUTLINE_POINTS = 24
 """Points on a round target's outline (a rectangle gets 5 per side)."""
 FLOOR_SIZE_M = 30.0
@@ -237,14 +243,42 @@ def _switchbox(builder: BodyBuilder, assets: AssetCache, t: TargetParams, north:
     return BuiltTarget(body, centre, rectangle_outline(centre, w, h), (mount,))
 
 
-def build_target(builder: BodyBuilder, assets: AssetCache, t: TargetParams, north: float) -> BuiltTarget:
-    if t.kind == "gauge":
+def _picture(
+    builder: BodyBuilder, assets: AssetCache, t: TargetParams, north: float, image: Path
+) -> BuiltTarget:
+    """A kind of the user's own: its picture on a thin panel fastened to the wall (`Face.image`)."""
+    w, h = t.size_m, t.face_height_m
+    height_px = max(8, round(PICTURE_WIDTH_PX * h / w))
+    stat = image.stat()
+    texture = assets.png(
+        ("picture", str(image), stat.st_mtime_ns, stat.st_size, height_px),
+        lambda: picture_texture(image, PICTURE_WIDTH_PX, height_px),
+    )
+    backing = 0.012
+    parts = [
+        Part("mesh", (w, 1.0, h), (0.0, 0.0, 0.0), mesh=assets.quad("front"), texture=texture),
+        Part("box", (w / 2, backing / 2, h / 2), (0.0, _FACE_GAP_M + backing / 2, 0.0), "#3c3f42"),
+    ]
+    centre = np.array([t.east_m, north - IMAGE_PANEL_STANDOFF_M, t.height_m])
+    body = builder.body(parts, tuple(centre), (w / 2, backing / 2, h / 2), (0.0, backing / 2, 0.0))
+    return BuiltTarget(body, centre, rectangle_outline(centre, w, h), ())
+
+
+def build_target(
+    builder: BodyBuilder, assets: AssetCache, t: TargetParams, north: float, vocabulary: Vocabulary
+) -> BuiltTarget:
+    """The target's bodies: a built-in model, or the picture of a kind of the user's own."""
+    face = vocabulary.kind(t.kind).face
+    model = face.model or t.kind
+    if face.image is not None:
+        return _picture(builder, assets, t, north, face.image)
+    if model == "gauge":
         return _gauge(builder, assets, t, north)
-    if t.kind == "valve":
+    if model == "valve":
         return _valve(builder, t, north)
-    if t.kind == "switchbox":
+    if model == "switchbox":
         return _switchbox(builder, assets, t, north)
-    raise ValueError(f"unknown target kind {t.kind!r}")
+    raise ValueError(f"target kind {t.kind!r} has neither a built-in model nor a picture")
 
 
 def _pipe(builder: BodyBuilder, item: WallItem, north: float, horizontal: bool, conduit: bool) -> int:

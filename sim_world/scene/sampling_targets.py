@@ -5,7 +5,7 @@ target stream exactly as a single-target scene always was. With `target.count` a
 one, the other targets are drawn from a stream of their own (so nothing else in the
 scene moves), beside the named one so that all are in view from its centred pose,
 with kinds distinct where `other_kinds` allows and, for two of one kind, trim colours
-of different names (`drone_inspect_core.targets.colour_name`): the attribute an instruction names.
+of different names (`drone_inspect_core.vocabulary.colour_name`): the attribute an instruction names.
 Every target then gets a local mount (a short pipe, or a switch box's conduit), so the
 named one is not told by its mount; no mount crosses another target's face.
 """
@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from drone_inspect_core.targets import colour_name
+from drone_inspect_core.vocabulary import colour_name
 from sim_world.scene.config import SceneConfig
 from sim_world.scene.textures_targets import GAUGE_SCALES, SWITCHBOX_LABELS
 
@@ -27,6 +27,8 @@ GAUGE_STANDOFF_M = 0.13
 VALVE_STANDOFF_M = 0.26
 """How far a handwheel's front stands off the wall (on its stem from the valve body)."""
 SWITCHBOX_DEPTH_M = 0.14
+IMAGE_PANEL_STANDOFF_M = 0.02
+"""A kind drawn as a picture (`Face.image`) is a thin panel fastened this far off the wall."""
 MOUNT_PIPE_COLOUR = "#8a8d8f"
 
 OTHER_EAST_M = (0.45, 1.2)
@@ -114,6 +116,9 @@ def sample_target(
     size = uniform(rng, cfg.size_m)
     aspect = float(pick(rng, SWITCHBOX_ASPECTS))
     face_height = size * aspect if kind == "switchbox" else size
+    panel = image_size_m(config, kind)
+    if panel is not None:  # a picture keeps its own size (the draws above keep the stream aligned)
+        size, face_height = panel
     height = uniform(rng, cfg.height_m)
     # The wall must hold the target (and a gauge's stem and pipe below it).
     height = float(np.clip(height, face_height / 2 + 0.5, config.wall.height_m - face_height / 2 - 0.2))
@@ -146,9 +151,21 @@ def target_footprint(target: TargetParams, margin_m: float = 0.0) -> tuple[float
     return target.east_m - hw, target.height_m - hh, target.east_m + hw, target.height_m + hh
 
 
+def image_size_m(config: SceneConfig, kind: str) -> tuple[float, float] | None:
+    """(width, height) of a kind drawn as a picture on a panel; None for a built-in model."""
+    kinds = config.vocabulary.kinds
+    face = kinds[kind].face if kind in kinds else None
+    return face.size_m if face is not None and face.image is not None else None
+
+
+def is_image_kind(config: SceneConfig, kind: str) -> bool:
+    return image_size_m(config, kind) is not None
+
+
 def target_standoff_m(target: TargetParams) -> float:
     """How far the target's face stands off the wall."""
-    return {"gauge": GAUGE_STANDOFF_M, "valve": VALVE_STANDOFF_M}.get(target.kind, SWITCHBOX_DEPTH_M)
+    standoffs = {"gauge": GAUGE_STANDOFF_M, "valve": VALVE_STANDOFF_M, "switchbox": SWITCHBOX_DEPTH_M}
+    return standoffs.get(target.kind, IMAGE_PANEL_STANDOFF_M)
 
 
 def rects_overlap(a: tuple[float, float, float, float], b: tuple[float, float, float, float]) -> bool:
@@ -174,6 +191,8 @@ def mounts_for(
         return (WallItem("pipe_h", east, up, length, 0.14, 0.13, MOUNT_PIPE_COLOUR, t.mount_variant),)
     if t.kind == "valve":
         return (WallItem("pipe_h", east, t.height_m, length, 0.16, 0.14, MOUNT_PIPE_COLOUR, t.mount_variant),)
+    if t.kind != "switchbox":
+        return ()  # a picture's panel is fastened to the wall itself
     top = t.height_m + t.face_height_m / 2
     return (WallItem("conduit_v", t.east_m, (top + h) / 2, 0.05, h - top, 0.05, "#b0b4b8"),)
 
@@ -223,6 +242,8 @@ def _kind_and_trim(
     cfg = config.target
 
     def free_colours(kind: str) -> tuple[str, ...]:
+        if is_image_kind(config, kind):  # a picture has no trim to tell two apart: one of it at most
+            return () if any(t.kind == kind for t in placed) else cfg.bezel_colours[:1]
         taken = {colour_name(t.bezel_colour) for t in placed if t.kind == kind}
         return tuple(c for c in cfg.bezel_colours if colour_name(c) not in taken)
 
@@ -232,8 +253,14 @@ def _kind_and_trim(
         used = {t.kind for t in placed}
         fresh = tuple(k for k in cfg.other_kinds if k not in used)
         choices = tuple(k for k in (fresh or cfg.other_kinds) if free_colours(k))
-        kind = str(pick(rng, choices or tuple(k for k in cfg.other_kinds if free_colours(k))))
-    return kind, str(pick(rng, free_colours(kind)))
+        choices = choices or tuple(k for k in cfg.other_kinds if free_colours(k))
+        if not choices:
+            raise SceneLayoutError(f"no kind of {cfg.other_kinds} can be told apart from the targets placed")
+        kind = str(pick(rng, choices))
+    colours = free_colours(kind)
+    if not colours:
+        raise SceneLayoutError(f"a twin of {kind!r} cannot be told apart from it (a picture has no trim)")
+    return kind, str(pick(rng, colours))
 
 
 def _beside(

@@ -8,6 +8,7 @@ RGB with row 0 at the top; the scene maps them onto the front faces upright.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -276,3 +277,13 @@ def round_sign(prohibition: bool, size_px: int = 128) -> np.ndarray:
             image, (round(0.88 * c), round(0.75 * c)), (round(1.12 * c), round(1.5 * c)), _WHITE, -1
         )
     return downsample(image, size_px, size_px)
+
+
+def picture_texture(path: Path, width_px: int, height_px: int) -> np.ndarray:
+    """A user's picture (a kind's face) as an RGB texture of the panel's shape (stretched to it)."""
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise ValueError(f"{path}: not a readable image")
+    return cv2.cvtColor(
+        cv2.resize(bgr, (width_px, height_px), interpolation=cv2.INTER_AREA), cv2.COLOR_BGR2RGB
+    )

@@ -1,9 +1,8 @@
-"""`dronectl bench sim|perception|inference|flight|px4 [options]`: the speed benchmarks.
+"""`dronectl bench sim|perception|inference|flight|px4|ardupilot [options]`: the speed benchmarks.
 
-Each benchmark's measuring code lives with the code it measures (`controller.benchmarks.sim`,
-`controller.benchmarks.flight`, `controller.benchmarks.px4`, `controller.benchmarks.perception`); its
-command line is a
-`tools/bench_<name>.py` with `main(argv) -> int`. This command only picks the module
+Each benchmark's measuring code lives in `controller/benchmarks/` (sim, flight, px4, ardupilot,
+perception, planner latency); its command line is a `tools/dronectl/bench_<name>.py` with
+`main(argv) -> int`. This command only picks the module
 (imported lazily, so one benchmark never pays for another's imports) and hands it the
 rest of the command line. `dronectl bench <name> --help` shows a benchmark's options.
 """
@@ -25,6 +24,10 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     ),
     "flight": ("dronectl.bench_flight", "vehicle command and telemetry latency"),
     "px4": ("dronectl.bench_px4", "real PX4 SITL in lockstep: readiness, hover drift, lockstep speed"),
+    "ardupilot": (
+        "dronectl.bench_ardupilot",
+        "real ArduCopter SITL in lockstep: readiness, hover drift, speed",
+    ),
 }
 
 

@@ -17,15 +17,17 @@ import argparse
 import json
 import logging
 import sys
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from controller.benchmarks.missions import BenchmarkConfig, format_summary, run_benchmark
-from controller.missions.schema import FaultSpec
+from controller.missions.schema import FaultSpec, Mission, load_mission, parse_mission
+from controller.planning.planners import PLANNER_NAMES
 from drone_inspect_core.files import OutputDirError
 from drone_inspect_core.parallel import RayUnavailableError, add_ray_option
 from drone_inspect_core.sim_speed import parse_sim_speed
+from dronectl.ardupilot_options import add_ardupilot_options, resolve_ardupilot_dir
+from sim_world.ardupilot_bridge.ardupilot_process import ArduPilotFolderError
 from sim_world.px4_bridge.px4_process import Px4FolderError, find_px4_dir
 
 
@@ -53,6 +55,48 @@ def faults_from_args(args: argparse.Namespace) -> dict[str, Any] | None:
     return faults or None
 
 
+def base_mission(args: argparse.Namespace) -> Mission:
+    """The mission every benchmark mission copies: `--mission FILE` (or the default), with the options
+    given on the command line over it; a missing PX4 folder is named before anything flies."""
+    given = {"vehicle": args.vehicle} if args.vehicle is not None else {}
+    for option, field in (
+        ("checkpoint", "checkpoint"), ("max_steps", "max_steps"), ("epsilon_px", "epsilon_px"),
+        ("detector", "detector"), ("detector_checkpoint", "detector_checkpoint"), ("targets", "targets"),
+        ("kind", "target_kind"),
+    ):  # fmt: skip
+        if getattr(args, option) is not None:
+            given[field] = getattr(args, option)
+    if args.twins:
+        given["twins"] = True
+    loop = {"scale_moves": False} if args.fixed_moves else {}
+    if args.second_choices is not None:
+        loop["max_second_choices"] = args.second_choices
+    faults = faults_from_args(args)
+    if args.mission is not None:
+        base = load_mission(args.mission)
+        data = {**base.model_dump(mode="json", exclude_unset=True), "name": "benchmark"}
+        source = f"--mission {args.mission} with the command line's options"
+    else:
+        data, source = {"name": "benchmark", "tags": ["benchmark"]}, "the command line's options"
+    data.update(given)
+    if loop:
+        data["loop"] = {**data.get("loop", {}), **loop}
+    if faults:
+        data["faults"] = faults
+    vehicle = data.get("vehicle", "sim")
+    if vehicle == "sim-mavlink" and args.sim_speed is not None:
+        data["sim_speed"] = _speed("--sim-speed", args.sim_speed)
+    if vehicle == "px4-sitl":
+        px4 = {"speed": _speed("--px4-speed", args.px4_speed or "max"), "keep_ulog": False}
+        folder = args.px4 or data.get("px4", {}).get("dir")
+        data["px4"] = {**data.get("px4", {}), **px4, "dir": str(find_px4_dir(folder))}
+    if vehicle == "ardupilot-sitl":
+        ardupilot = {"speed": _speed("--ardupilot-speed", args.ardupilot_speed or "max"), "keep_logs": False}
+        folder = args.ardupilot or data.get("ardupilot", {}).get("dir")
+        data["ardupilot"] = {**data.get("ardupilot", {}), **ardupilot, "dir": resolve_ardupilot_dir(folder)}
+    return parse_mission(data, source)
+
+
 def _speed(option: str, text: str) -> float | str:
     try:
         return parse_sim_speed(text)
@@ -66,32 +110,37 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--seed", type=int, default=0, help="benchmark seed: picks the scenes and starts")
     parser.add_argument(
         "--planner",
-        default="latent,classic,random,oracle",
+        default=",".join(PLANNER_NAMES),
         help="comma-separated planners (default: %(default)s)",
     )
     parser.add_argument(
+        "--mission",
+        type=Path,
+        help="the base mission every benchmark mission copies (scene family, kinds, vehicle, loop, "
+        "faults, ...); its scene seed, start, planner and instruction are drawn per mission; the options "
+        "below change it (default: the default mission)",
+    )
+    parser.add_argument(
         "--vehicle",
-        default="sim",
-        choices=("sim", "sim-mavlink", "px4-sitl"),
-        help="in-process, the sim-vehicle over MAVLink, or real PX4 SITL flying the world",
+        choices=("sim", "sim-mavlink", "px4-sitl", "ardupilot-sitl"),
+        help="in-process (default), the sim-vehicle over MAVLink, or real PX4 / ArduPilot SITL flying "
+        "the world",
     )
     parser.add_argument("--px4", help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
-    parser.add_argument(
-        "--px4-speed", default="max", help="px4-sitl: simulation speed, a factor or 'max' (default: max)"
-    )
+    parser.add_argument("--px4-speed", help="px4-sitl: simulation speed, a factor or 'max' (default: max)")
+    add_ardupilot_options(parser, speed_default="max")
     parser.add_argument(
         "--sim-speed",
-        default="1",
         help="sim-mavlink: the sim-vehicle's speed, a factor (1 = real time, the default) or 'max'",
     )
     parser.add_argument("--checkpoint", help="latent planner checkpoint folder (default: the shipped one)")
-    parser.add_argument("--max-steps", type=int, default=20, help="step budget per mission (default: 20)")
+    parser.add_argument("--max-steps", type=int, help="step budget per mission (default: 20)")
     parser.add_argument("--epsilon-px", type=float, help="ε in pixels (default: 10 at 224 px)")
     parser.add_argument(
-        "--detector",
-        default="image",
-        choices=("image", "truth"),
-        help="truth: isolate the planners (sim only)",
+        "--kind", help="the named target's kind in every mission (default: drawn from the scene family)"
+    )
+    parser.add_argument(
+        "--detector", choices=("image", "truth"), help="truth: isolate the planners (sim only; default image)"
     )
     parser.add_argument("--detector-checkpoint", help="image detector run folder (default: the shipped one)")
     parser.add_argument(
@@ -104,9 +153,7 @@ def main(argv: list[str]) -> int:
         help="moves per mission on the planner's best-ranked move after a 'no move' far from centre "
         "(default: the loop's 4; 0: such a 'no move' is a stall, the planner alone)",
     )
-    parser.add_argument(
-        "--targets", type=int, default=1, help="targets in every scene, the named one included (1..4)"
-    )
+    parser.add_argument("--targets", type=int, help="targets in every scene, the named one included (1..4)")
     parser.add_argument(
         "--twins", action="store_true", help="one other target of the named kind, in another trim colour"
     )
@@ -123,7 +170,7 @@ def main(argv: list[str]) -> int:
         help="fraction of missions whose instruction names a target not in the scene "
         "(they must end target_not_found)",
     )
-    faults = parser.add_argument_group("injected faults (sim-mavlink and px4-sitl; gusts also sim)")
+    faults = parser.add_argument_group("injected faults (sim-mavlink and the SITL vehicles; gusts also sim)")
     faults.add_argument(
         "--link-loss", type=float, default=0.0, help="fraction of MAVLink datagrams lost, each way"
     )
@@ -171,18 +218,12 @@ def main(argv: list[str]) -> int:
     logging.getLogger().setLevel(logging.WARNING)
     try:
         config = BenchmarkConfig(
+            base=base_mission(args),
             n=args.n, seed=args.seed, planners=tuple(p.strip() for p in args.planner.split(",") if p.strip()),
-            vehicle=args.vehicle, max_steps=args.max_steps, epsilon_px=args.epsilon_px,
-            checkpoint=args.checkpoint, detector=args.detector, parallel=args.parallel,
-            detector_checkpoint=args.detector_checkpoint, scale_moves=not args.fixed_moves,
-            px4_dir=args.px4, px4_speed=_speed("--px4-speed", args.px4_speed), faults=faults_from_args(args),
-            sim_speed=_speed("--sim-speed", args.sim_speed),
-            rerun=args.rerun, ray=args.ray, targets=args.targets, twins=args.twins,
-            instructions=args.instructions, absent=args.absent, second_choices=args.second_choices,
+            parallel=args.parallel, rerun=args.rerun, ray=args.ray, instructions=args.instructions,
+            absent=args.absent,
         )  # fmt: skip
-        if config.vehicle == "px4-sitl":  # a missing PX4 folder is named before anything flies
-            config = replace(config, px4_dir=str(find_px4_dir(config.px4_dir)))
-    except Px4FolderError as exc:
+    except (Px4FolderError, ArduPilotFolderError) as exc:
         print(f"dronectl benchmark-missions: {exc}", file=sys.stderr)
         return 2
     except ValueError as exc:

@@ -31,6 +31,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "dronectl.px4_sim_cmd",
         "real PX4 SITL flying the simulated drone (lockstep), camera as MJPEG",
     ),
+    "ardupilot-sim": (
+        "dronectl.ardupilot_sim_cmd",
+        "real ArduCopter SITL flying the simulated drone, lockstep",
+    ),
     "move": ("dronectl.move_cmd", "connect to a vehicle, take off, fly one discrete move, land"),
     "train-detector": ("dronectl.train_detector_cmd", "train the image-based target detector"),
     "train": ("dronectl.train_cmd", "train the latent dynamics planner"),

@@ -158,10 +158,11 @@ def config_from(args: argparse.Namespace) -> FlownCollectConfig:
 
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
+    from controller.collection.capture import CameraLostError
     from controller.collection.goal import GoalFileError
     from controller.collection.goal_flight import GoalError
     from controller.collection.plan import PlanError
-    from controller.collection.run import CameraLostError, collect_flown
+    from controller.collection.run import collect_flown
     from controller.collection.writer import ResumeError
     from controller.missions.schema import MissionFileError
     from drone_inspect_core.config_files import ConfigFileError

@@ -14,15 +14,20 @@ import json
 import logging
 import sys
 from pathlib import Path
+from typing import Any
 
 from controller.benchmarks.fault_matrix import format_markdown, run_fault_matrix
 from controller.benchmarks.missions import BenchmarkConfig
+from dronectl.ardupilot_options import FOLDER_HELP, resolve_ardupilot_dir
 
 
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="dronectl fault-matrix", description=__doc__.splitlines()[0])
-    parser.add_argument("--vehicle", default="sim-mavlink", choices=("sim-mavlink", "px4-sitl"))
+    parser.add_argument(
+        "--vehicle", default="sim-mavlink", choices=("sim-mavlink", "px4-sitl", "ardupilot-sitl")
+    )
     parser.add_argument("--px4", help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
+    parser.add_argument("--ardupilot", help=FOLDER_HELP)
     parser.add_argument("--n", type=int, default=20, help="missions per fault (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=1, help="benchmark seed (default: %(default)s)")
     parser.add_argument("--planner", default="latent", help="one planner (default: %(default)s)")
@@ -32,10 +37,18 @@ def main(argv: list[str]) -> int:
     args = parser.parse_args(argv)
     logging.getLogger().setLevel(logging.WARNING)
     try:
-        base = BenchmarkConfig(
-            n=args.n, seed=args.seed, planners=(args.planner,), vehicle=args.vehicle, parallel=args.parallel,
-            px4_dir=args.px4,
-        )  # fmt: skip
+        mission: dict[str, Any] = {"vehicle": args.vehicle}
+        if args.vehicle == "px4-sitl":
+            mission["px4"] = {"dir": args.px4, "speed": "max", "keep_ulog": False}
+        if args.vehicle == "ardupilot-sitl":
+            mission["ardupilot"] = {
+                "dir": resolve_ardupilot_dir(args.ardupilot),
+                "speed": "max",
+                "keep_logs": False,
+            }
+        base = BenchmarkConfig.of(
+            mission, n=args.n, seed=args.seed, planners=(args.planner,), parallel=args.parallel
+        )
     except ValueError as exc:
         parser.error(str(exc))
     rows = run_fault_matrix(base)

@@ -8,7 +8,8 @@ with the shipped latent planner checkpoint:
     dronectl fly --seed 7 --epsilon-px 6
 
 Real PX4 firmware (SITL) flying the simulated world: `--vehicle px4-sitl --px4 DIR`
-(DIR: a PX4 SITL build folder, default $PX4_SITL_DIR).
+(DIR: a PX4 SITL build folder, default $PX4_SITL_DIR); real ArduPilot: `--vehicle ardupilot-sitl`
+(`--ardupilot DIR`, default $ARDUPILOT_SITL_DIR, else ../shared/ardupilot-sitl).
 
 A real vehicle: a mission file with `vehicle: udpin://0.0.0.0:14540` and
 `camera: http://<drone>:8080/stream.mjpg` (or the same as --vehicle/--camera).
@@ -27,14 +28,15 @@ from typing import Any
 
 from controller.missions.results import MissionResult
 from controller.missions.schema import (
-    PLANNER_NAMES,
     PX4_SITL,
     Mission,
     MissionFileError,
     Px4Spec,
     load_mission,
 )
+from controller.planning.planners import PLANNER_NAMES
 from drone_inspect_core.files import OutputDirError
+from dronectl.ardupilot_options import add_ardupilot_options, apply_ardupilot_options
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[2] / "missions" / "default.yaml"
 
@@ -114,12 +116,15 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--seed", type=int, help="override the scene seed (and a random start's seed)")
     parser.add_argument("--epsilon-px", type=float, help="override ε, pixels")
     parser.add_argument("--max-steps", type=int, help="override the step budget")
-    parser.add_argument("--vehicle", help="override the vehicle: sim, sim-mavlink, px4-sitl or a MAVLink URL")
+    parser.add_argument(
+        "--vehicle", help="override the vehicle: sim, sim-mavlink, px4-sitl, ardupilot-sitl or a MAVLink URL"
+    )
     parser.add_argument("--px4", type=Path, help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
     parser.add_argument(
         "--px4-speed",
         help="px4-sitl: simulated seconds per wall second, or 'max' (default: the mission's, 1)",
     )
+    add_ardupilot_options(parser)
     parser.add_argument(
         "--sim-speed",
         help="sim-mavlink: the sim-vehicle's simulated seconds per wall second, or 'max' (default: the "
@@ -147,7 +152,7 @@ def main(argv: list[str]) -> int:
         mission = load_mission(args.mission, _overrides(args))
         if args.seed is not None:
             mission = mission.with_seed(args.seed)
-        mission = _px4_options(mission, args)
+        mission = apply_ardupilot_options(_px4_options(mission, args), args)
     except (MissionFileError, ValueError) as exc:
         print(f"dronectl fly: {exc}", file=sys.stderr)
         return 2

@@ -14,9 +14,11 @@ import time
 from pathlib import Path
 
 from controller.missions.report import fresh_report_dir
-from controller.missions.schema import PLANNER_NAMES, MissionFileError
+from controller.missions.schema import MissionFileError
 from controller.missions.suite import SuiteOptions, format_table, run_suite, write_junit
+from controller.planning.planners import PLANNER_NAMES
 from drone_inspect_core.files import OutputDirError
+from dronectl.ardupilot_options import FOLDER_HELP
 
 
 def main(argv: list[str]) -> int:
@@ -45,6 +47,7 @@ def main(argv: list[str]) -> int:
     run.add_argument(
         "--px4", type=Path, help="PX4 SITL build folder for px4-sitl missions (default: $PX4_SITL_DIR)"
     )
+    run.add_argument("--ardupilot", type=Path, help=FOLDER_HELP)
     run.add_argument("-v", "--verbose", action="store_true", help="log every module's progress")
     args = parser.parse_args(argv)
     if not args.verbose:
@@ -60,6 +63,7 @@ def main(argv: list[str]) -> int:
             tags=tuple(args.tag),
             exclude_tags=tuple(args.skip_tag),
             px4_dir=None if args.px4 is None else str(args.px4.resolve()),
+            ardupilot_dir=None if args.ardupilot is None else str(args.ardupilot.resolve()),
         )
         suite = run_suite(args.directory, options)
     except (MissionFileError, ValueError, OutputDirError) as exc:

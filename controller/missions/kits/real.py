@@ -1,4 +1,7 @@
-"""The kit of a real vehicle: MAVSDK on the mission's URL and the stream camera on its camera URL; no truth.
+"""The kit of a real vehicle: its MAVLink URL and the stream camera on its camera URL; no truth.
+
+The backend follows the vehicle's autopilot (`mission.autopilot`; "auto": its HEARTBEAT says):
+MAVSDK for PX4, the GUIDED-mode backend for ArduPilot (`flight.autopilots.MavlinkVehicle`).
 
 For a `udpin://` URL the .tlog relay takes the URL's port and MAVSDK listens behind it
 (`REAL_CLIENT_PORT_SHIFT` higher); other links are flown without a .tlog. Nothing here
@@ -22,8 +25,8 @@ from controller.missions.kits.base import (
     planner_for,
 )
 from controller.missions.schema import Mission
+from flight.autopilots import MavlinkVehicle
 from flight.link_faults import LinkFaults
-from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
 from flight.urls import udpin_address
 from perception.stream_camera import StreamCamera
@@ -36,7 +39,8 @@ REAL_CLIENT_PORT_SHIFT = 1000
 @contextmanager
 def open_real_kit(mission: Mission, out_dir: Path, models: LoadedModels | None = None) -> Iterator[FlightKit]:
     """A vehicle at `mission.vehicle` and its camera stream; no truth. Fails fast on a bad URL."""
-    with open_real_vehicle(mission.vehicle, mission.camera, out_dir, link_faults_for(mission)) as opened:
+    faults = link_faults_for(mission)
+    with open_real_vehicle(mission.vehicle, mission.camera, out_dir, mission.autopilot, faults) as opened:
         frame = opened.camera.read()
         yield FlightKit(
             vehicle=opened.vehicle,
@@ -52,9 +56,14 @@ def open_real_kit(mission: Mission, out_dir: Path, models: LoadedModels | None =
 
 @contextmanager
 def open_real_vehicle(
-    vehicle_url: str, camera_url: str, out_dir: Path, faults: LinkFaults | None = None
+    vehicle_url: str,
+    camera_url: str,
+    out_dir: Path,
+    autopilot: str = "auto",
+    faults: LinkFaults | None = None,
 ) -> Iterator[OpenedVehicle]:
-    """MAVSDK on `vehicle_url` (behind the .tlog relay for a udpin:// link) and the camera stream."""
+    """The vehicle at `vehicle_url` (behind the .tlog relay for a udpin:// link; its autopilot's backend,
+    `flight.autopilots.MavlinkVehicle`) and the camera stream."""
     with ExitStack() as stack:
         url = vehicle_url
         tlog = None
@@ -70,7 +79,12 @@ def open_real_vehicle(
             url = f"udpin://127.0.0.1:{port + REAL_CLIENT_PORT_SHIFT}"
         else:
             log.warning("%s is not a udpin:// link: flying without a .tlog", url)
-        vehicle = stack.enter_context(MavsdkVehicle(MavsdkConfig(url=url, shown_url=vehicle_url)))
+        vehicle = stack.enter_context(MavlinkVehicle(url, autopilot, shown_url=vehicle_url))
         camera = stack.enter_context(StreamCamera(camera_url, timeout_s=3.0, open_timeout_s=10.0))
-        info = {"backend": "MAVSDK + stream camera", "vehicle": vehicle_url, "camera": camera_url}
+        info = {
+            "backend": "MAVLink (MAVSDK for PX4, GUIDED for ArduPilot) + stream camera",
+            "autopilot": autopilot,
+            "vehicle": vehicle_url,
+            "camera": camera_url,
+        }
         yield OpenedVehicle(vehicle, camera, info, tlog)

@@ -1,4 +1,4 @@
-"""What the kits of simulated MAVLink vehicles (sim-vehicle, PX4 SITL) share.
+"""What the kits of simulated MAVLink vehicles (sim-vehicle, PX4 SITL, ArduPilot SITL) share.
 
 Both start the drone landed below the mission's start pose and take off to its height,
 give the vehicle a random MAVLink system id that MAVSDK insists on (so a run never flies
@@ -24,7 +24,7 @@ from controller.missions.kits.base import (
 )
 from controller.missions.schema import Mission, StartOffset
 from controller.missions.setup import scene_config_for, wind_config_for
-from drone_inspect_core.targets import colour_name
+from drone_inspect_core.vocabulary import colour_name
 from sim_world.rendering.camera import CameraConfig
 from sim_world.rendering.video import VideoFaults
 from sim_world.scene.config import SceneConfig

@@ -1,0 +1,150 @@
+"""The `ardupilot-sitl` kit of a mission: real ArduCopter SITL flying the PyBullet world, flown in GUIDED.
+
+`python -m sim_world.ardupilot_bridge` runs as a child (its own session, gone with us): the world with
+the drone landed below the mission's start pose, its camera as MJPEG, and ArduCopter SITL on the JSON
+interface in lockstep with it. The controller then talks to ArduPilot exactly as to a real vehicle:
+ArduPilot sends its MAVLink to 127.0.0.1 only, to the port the .tlog relay took (a free one, locked to
+this run's system id), which forwards to the GUIDED-mode backend (`flight.ardupilot_backend`) on
+another free port; the camera is read with OpenCV from the MJPEG stream (a free port too); the
+bridge's `/truth.json` is read for judging only.
+
+Every run holds its ArduPilot instance N (`ardupilot_instance`: `auto` takes the lowest free one, so
+parallel missions and test workers never share ports) and gives ArduPilot a random MAVLink system id
+(`--sysid`): the backend connects only to that id, so an ArduPilot left over from another run is
+never flown.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from pathlib import Path
+
+from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, OpenedVehicle, link_faults_for
+from controller.missions.kits.simulated import (
+    SIM_HFOV_DEG,
+    SimTruth,
+    SimulatedVehicle,
+    new_system_id,
+    simulated_mavlink_kit,
+    simulated_world_fields,
+)
+from controller.missions.schema import Mission, StartOffset
+from controller.missions.setup import start_offset_for
+from drone_inspect_core.ports import free_port
+from flight.ardupilot_backend import ArduPilotConfig, ArduPilotVehicle
+from flight.relay import MavlinkRelay
+from flight.sim_launcher import SimulatorProcess
+from perception.stream_camera import StreamCamera
+from sim_world.ardupilot_bridge.ardupilot_process import (
+    ardupilot_instance,
+    find_ardupilot_dir,
+    json_port,
+)
+from sim_world.ardupilot_bridge.bridge import JsonTiming
+from sim_world.ardupilot_bridge.run import ArduPilotSimConfig
+from sim_world.ardupilot_bridge.serve import READY_PREFIX, config_to_json
+from sim_world.sitl.imu import SensorNoise
+
+log = logging.getLogger(__name__)
+
+ARDUPILOT_START_TIMEOUT_S = 90.0
+
+
+def ardupilot_sim_config(
+    mission: Mission, instance: int, out_dir: Path, system_id: int, mavlink_port: int | None = None
+) -> ArduPilotSimConfig:
+    """The simulator's configuration for a mission (its world, start, ArduPilot options); ArduPilot sends
+    its MAVLink to `mavlink_port` (the relay's), its camera streams on a free port."""
+    spec = mission.ardupilot
+    start = start_offset_for(mission, SIM_HFOV_DEG, SIM_HFOV_DEG)
+    return ArduPilotSimConfig(
+        ardupilot_dir=find_ardupilot_dir(spec.dir),
+        instance=instance,
+        **simulated_world_fields(mission, start),
+        video_port=0,
+        mavlink_port=mavlink_port,
+        timing=JsonTiming(speed=None if spec.speed == "max" else float(spec.speed)),
+        noise=SensorNoise().scaled(spec.noise),
+        system_id=system_id,
+        params=dict(spec.params),
+        log_dir=out_dir / "ardupilot" if spec.keep_logs else None,
+        ardupilot_dies_at_s=mission.faults.vehicle_dies_at_s,
+    )
+
+
+@contextmanager
+def open_ardupilot_sitl_kit(
+    mission: Mission, out_dir: Path, models: LoadedModels | None = None
+) -> Iterator[FlightKit]:
+    """ArduPilot SITL + bridge (a child), tlog relay, GUIDED backend, MJPEG camera, detector, planner."""
+    with open_ardupilot_sitl(mission, out_dir) as sim:
+        yield simulated_mavlink_kit(mission, models, sim)
+
+
+@contextmanager
+def open_ardupilot_sitl(mission: Mission, out_dir: Path) -> Iterator[SimulatedVehicle]:
+    """ArduPilot SITL and its bridge (a child), the .tlog relay, the GUIDED backend and the MJPEG camera."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    system_id = new_system_id()  # this run's ArduPilot, and no other
+    with ExitStack() as stack:
+        instance = stack.enter_context(ardupilot_instance(mission.ardupilot.instance))
+        client_port = free_port("udp")
+        # The relay binds a free port first; ArduPilot sends its MAVLink there, locked to its system id.
+        tlog = stack.enter_context(
+            MavlinkRelay(
+                0,
+                client_port,
+                out_dir / TLOG_NAME,
+                faults=link_faults_for(mission),
+                vehicle_system_id=system_id,
+            )
+        )
+        config = ardupilot_sim_config(mission, instance, out_dir, system_id, tlog.listen_address[1])
+        sim = stack.enter_context(
+            SimulatorProcess(
+                "sim_world.ardupilot_bridge",
+                config_to_json(config),
+                out_dir / "ardupilot_sim.log",
+                READY_PREFIX,
+                start_timeout_s=ARDUPILOT_START_TIMEOUT_S,
+                name=f"ArduPilot SITL instance {instance}",
+            )
+        )
+        truth = SimTruth(sim.ready["truth_url"])
+        vehicle = stack.enter_context(
+            ArduPilotVehicle(
+                ArduPilotConfig(
+                    url=f"udpin://127.0.0.1:{client_port}",
+                    expected_system_id=system_id,
+                    clock="vehicle",
+                    hold_mode=mission.ardupilot.hold_mode,
+                )
+            )
+        )
+        camera = stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
+        o = config.start_offset
+        assert o is not None
+        start = StartOffset(right_m=o.right_m, up_m=o.up_m, distance_m=o.distance_m, yaw_deg=o.yaw_deg)
+        opened = OpenedVehicle(
+            vehicle, camera,
+            info={
+                "backend": "ArduPilot SITL (real firmware) flying the PyBullet world; GUIDED + MJPEG",
+                "ardupilot_dir": str(config.ardupilot_dir),
+                "ardupilot_instance": instance,
+                "ardupilot_system_id": system_id,
+                "ardupilot_clock_offset_s": 0.0,
+                "speed": mission.ardupilot.speed,
+                "ports": {
+                    "ardupilot_json_udp": json_port(instance),
+                    "ardupilot_mavlink_udp": tlog.listen_address[1],
+                    "client_udp": client_port,
+                    "video_http": sim.ready["video_url"],
+                },
+                "simulator_pid": sim.pid,
+                "ardupilot_pid": sim.ready.get("ardupilot_pid"),
+            },
+            tlog=tlog,
+        )  # fmt: skip
+        yield SimulatedVehicle(opened, truth, config.scene, mission.scene.seed, start)

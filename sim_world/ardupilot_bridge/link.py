@@ -1,0 +1,93 @@
+"""The simulator's end of ArduPilot's JSON interface: a UDP port on loopback that ArduPilot sends to.
+
+ArduPilot (`--model JSON:127.0.0.1`, instance N) sends every servo packet to 127.0.0.1:9002+10N and
+reads the reply on the socket it sent from, so the server answers each packet to its sender. The
+port is bound at construction (a port in use is an error naming it, before ArduPilot starts), on
+127.0.0.1 only. Datagrams that are not servo packets are counted and dropped.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import logging
+import select
+import socket
+
+from sim_world.ardupilot_bridge.protocol import ServoPacket, ServoPacketError
+
+log = logging.getLogger(__name__)
+
+JSON_BASE_PORT = 9002
+PORT_STRIDE = 10  # ArduPilot adds 10·N to every port of instance N
+
+
+class PhysicsLinkError(OSError):
+    """The physics port could not be opened."""
+
+
+class ArduPilotSilentError(ConnectionError):
+    """ArduPilot stopped sending servo packets (it exited, was killed, or hangs)."""
+
+
+class JsonPhysicsServer:
+    """One ArduPilot's physics link; `close()` or a context manager."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int = JSON_BASE_PORT) -> None:
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self._sock.bind((host, port))
+        except OSError as exc:
+            self._sock.close()
+            hint = (
+                " (another ArduPilot bridge or simulator is running there?)"
+                if exc.errno == errno.EADDRINUSE
+                else ""
+            )
+            raise PhysicsLinkError(
+                exc.errno, f"cannot listen on UDP {host}:{port} for ArduPilot: {exc.strerror}{hint}"
+            ) from exc
+        self._sock.setblocking(False)
+        self.address = self._sock.getsockname()
+        self.peer: tuple[str, int] | None = None
+        self.packets_in = 0
+        self.bad_packets = 0
+
+    def receive(self, timeout_s: float) -> ServoPacket | None:
+        """The newest servo packet that arrives within `timeout_s` (None if none); older queued ones are
+        dropped (in lockstep there is never more than one)."""
+        ready, _, _ = select.select([self._sock], [], [], max(0.0, timeout_s))
+        if not ready:
+            return None
+        newest = None
+        while True:
+            try:
+                data, peer = self._sock.recvfrom(512)
+            except BlockingIOError:
+                return newest
+            try:
+                packet = ServoPacket.parse(data)
+            except ServoPacketError as exc:
+                self.bad_packets += 1
+                log.debug("dropped a datagram from %s:%d: %s", *peer, exc)
+                continue
+            if self.peer != peer:
+                log.info("ArduPilot's physics frames come from %s:%d", *peer)
+                self.peer = peer
+            self.packets_in += 1
+            newest = packet
+
+    def reply(self, data: bytes) -> None:
+        """Send the state to ArduPilot (to the sender of the last servo packet)."""
+        if self.peer is not None:
+            self._sock.sendto(data, self.peer)
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError):
+            self._sock.close()
+
+    def __enter__(self) -> JsonPhysicsServer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

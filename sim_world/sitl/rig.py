@@ -1,0 +1,121 @@
+"""The simulated side of an autopilot in the loop: the quadrotor, its world, its truth and its camera clock.
+
+An external autopilot (PX4 or ArduPilot SITL) boots with the drone resting on the floor below the
+mission's start pose, rotors stopped; the autopilot then flies it through the rotor speed commands
+its bridge derives from the motor outputs. Truth is what the bridge reports to the autopilot (before
+noise) and what judges a flight; it is expressed in the autopilot's frames: NED position and
+velocity from the start point, body FRD rates, the body-to-NED rotation.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+import pybullet as p
+
+from drone_inspect_core.frames import enu_to_ned
+from sim_world.physics.quadrotor import QuadrotorParams
+from sim_world.physics.wind import WindConfig
+from sim_world.rendering.camera import CameraConfig
+from sim_world.scene.config import SceneConfig
+from sim_world.sitl.imu import Truth
+from sim_world.vehicle.serve import StartPose
+from sim_world.world import World, WorldConfig
+
+SITL_QUAD = QuadrotorParams(landing_gear_stiffness_n_m=3000.0)
+"""The project's quadrotor with compliant landing legs (3 mm static deflection, damped): with
+PyBullet's rigid contact a touchdown clipped the accelerometer and an autopilot's height estimate
+diverged."""
+
+ENU_TO_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+FRD_TO_FLU = np.diag([1.0, -1.0, -1.0])
+
+
+def build_sitl_world(
+    scene: SceneConfig,
+    seed: int,
+    image_size_px: int,
+    physics_hz: float,
+    wind: WindConfig,
+    start_offset: StartPose | None,
+) -> World:
+    """The world with the drone landed below the start pose (or at the default start), rotors stopped."""
+    camera = CameraConfig(width=image_size_px, height=image_size_px)
+    world = World(
+        WorldConfig(scene=scene, camera=camera, drone=SITL_QUAD, physics_hz=physics_hz, wind=wind),
+        seed=seed,
+    )
+    if start_offset is not None:
+        o = start_offset
+        position, yaw_enu = world.scene.pose_for_offset(o.right_m, o.up_m, o.distance_m, o.yaw_deg)
+        world.drone.set_pose((float(position[0]), float(position[1]), world.drone.resting_height_m), yaw_enu)
+    world.drone.stop_rotors()
+    return world
+
+
+def quaternion_wxyz(rotation: np.ndarray) -> list[float]:
+    """A rotation matrix as a unit quaternion (w, x, y, z), MAVLink's order."""
+    m = rotation
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0.0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
+    else:
+        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
+    if q[0] < 0.0:
+        q = [-v for v in q]
+    return [float(v) for v in q]
+
+
+class TruthReader:
+    """The world's state as `Truth` (NED from `origin_enu_m`, body FRD), once per sensor period.
+
+    The acceleration is the velocity's change since the previous read over `period_s` (read once
+    per period, as the bridges do): exact for the physics step, contacts included.
+    """
+
+    def __init__(self, world: World, origin_enu_m: np.ndarray, period_s: float) -> None:
+        self.world, self.origin_enu_m, self.period_s = world, origin_enu_m, period_s
+        self._velocity_ned = enu_to_ned(world.state().velocity_enu_m_s)
+
+    def read(self) -> Truth:
+        world = self.world
+        state = world.state()
+        velocity = ENU_TO_NED @ state.velocity_enu_m_s
+        acceleration = (velocity - self._velocity_ned) / self.period_s
+        self._velocity_ned = velocity
+        r_enu_flu = np.array(p.getMatrixFromQuaternion(state.quaternion_xyzw.tolist())).reshape(3, 3)
+        rates = state.angular_velocity_flu_rad_s
+        return Truth(
+            time_s=world.time_s,
+            position_ned_m=ENU_TO_NED @ (state.position_enu_m - self.origin_enu_m),
+            velocity_ned_m_s=velocity,
+            acceleration_ned_m_s2=acceleration,
+            rotation_ned_frd=ENU_TO_NED @ r_enu_flu @ FRD_TO_FLU,
+            rates_frd_rad_s=np.array([rates[0], -rates[1], -rates[2]]),
+        )
+
+
+class CameraClock:
+    """What a bridge needs of a camera: take the pose for a frame (the video feed's `capture`) every
+    1/fps of simulated time."""
+
+    def __init__(self, capture: Callable[[], None], fps: float) -> None:
+        self._capture, self._period = capture, 1.0 / fps
+        self._next_s = 0.0
+        self.frames = 0
+
+    def tick(self, sim_s: float) -> None:
+        if sim_s + 1e-9 >= self._next_s:
+            self._capture()
+            self.frames += 1
+            self._next_s = max(self._next_s + self._period, sim_s)
