@@ -38,6 +38,11 @@ from perception.target_tracker import TemplateTracker, TrackerConfig
 
 log = logging.getLogger(__name__)
 
+MIN_SCORE = 0.5
+"""The match score a label accepts: lower than the tracker's own default (0.6), because a label has a second
+guard, the pose check, and a see-through target (a valve's handwheel) scores 0.5-0.6 from oblique views
+while landing within 2 px of the truth."""
+
 
 @dataclass(frozen=True)
 class Label:
@@ -96,7 +101,7 @@ class LabelMaker:
             raise ValueError("LabelMaker needs the goal image")
         self.camera, self.goal, self.agree_px = camera, goal, agree_px
         self.search_px = search_factor * agree_px
-        self.tracker = TemplateTracker(goal.image, goal.box_px, tracker)
+        self.tracker = TemplateTracker(goal.image, goal.box_px, tracker or TrackerConfig(min_score=MIN_SCORE))
         self._target = camera.point_ned(goal.pose, goal.offset_px, goal.depth_m)
         self.bias_window, self.reanchor_after = bias_window, reanchor_after
         self.unexpected_score = unexpected_score
