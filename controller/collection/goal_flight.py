@@ -116,7 +116,7 @@ def goal_box(config: FlownCollectConfig, image: np.ndarray) -> tuple[tuple[float
                 f"--goal-box {x:g},{y:g},{w:g},{h:g} does not lie inside the {width}x{height} image"
             )
         return (x, y, x + w, y + h), "given"
-    detector = _shipped_detector()
+    detector = shipped_detector()
     detections = [d for d in detector.detect_all(image) if d.kind == config.kind]
     if not detections:
         candidate = config.out_dir / "goal_candidate.png"
@@ -130,7 +130,11 @@ def goal_box(config: FlownCollectConfig, image: np.ndarray) -> tuple[tuple[float
 
 
 @functools.cache
-def _shipped_detector() -> Any:
+def shipped_detector() -> Any:
+    """The shipped image detector, loaded once. Load it on the ground (`collect_flown` does, when the goal
+    box is the detector's): torch's import and the ONNX export hold Python's lock for seconds, during which
+    MAVSDK's callback thread waits and its setpoint stream with it, and PX4 (and the sim-vehicle) fail safe
+    out of offboard."""
     from perception.image_detector import ImageDetector  # torch: loaded only when the detector is asked
 
     return ImageDetector.shipped()

@@ -40,6 +40,7 @@ from controller.collection.goal_flight import (
     centre_by_image,
     climb_to,
     record_goal,
+    shipped_detector,
     take_offboard_here,
     verify_goal,
 )
@@ -146,6 +147,8 @@ def collect_flown(config: FlownCollectConfig, on_capture: OnCapture | None = Non
     `on_capture` is called after each capture is written (tests inject faults there).
     """
     model, goal = check_inputs(config)
+    if goal is None and not config.resume and config.goal_box_px is None:
+        shipped_detector()  # on the ground, before anything flies (see its docstring)
     dataset = FlownDataset(config.out_dir, config.resume)
     if config.resume:
         goal = load_goal(config.out_dir)
