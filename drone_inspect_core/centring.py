@@ -50,6 +50,28 @@ def axis_signs(du_px: float, dv_px: float, epsilon_px: float) -> tuple[int, int]
     return sx, sz
 
 
+SECTOR_DIRECTIONS: dict[str, tuple[int, int]] = {
+    "N": (0, 1),
+    "NE": (1, 1),
+    "E": (1, 0),
+    "SE": (1, -1),
+    "S": (0, -1),
+    "SW": (-1, -1),
+    "W": (-1, 0),
+    "NW": (-1, 1),
+}
+"""The dataset's sectors as `axis_signs`: (sx, sz), sx = +1 target right of centre (du > ε), sz = +1 target
+above centre (dv < −ε)."""
+
+
+def sector_of_offset(du_px: float, dv_px: float, epsilon_px: float) -> str:
+    """The sector of an offset under the ε bands ('centre' when within ε on both axes)."""
+    sx, sz = axis_signs(du_px, dv_px, epsilon_px)
+    if sx == 0 and sz == 0:
+        return "centre"
+    return next(name for name, d in SECTOR_DIRECTIONS.items() if d == (sx, sz))
+
+
 def within(du_px: float, dv_px: float, epsilon_px: float) -> bool:
     """|du| ≤ ε and |dv| ≤ ε: no move asked for on either axis."""
     return axis_signs(du_px, dv_px, epsilon_px) == (0, 0)

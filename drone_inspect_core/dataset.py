@@ -1,9 +1,21 @@
-"""The dataset folder on disk: `dataset.json`, `manifest.jsonl`, `images/*.png`.
+"""The dataset folder on disk: `dataset.json`, `manifest.jsonl`, `images/*.png`: one format for rendered
+and flown collections.
 
-Written by `sim_world.collection.collect`, read by perception and the controller through
-`load_manifest`. The manifest stores truth only (target centre and bbox in pixels,
-drone pose, scene parameters, split, sector); labels are derived from the offsets
-with `controller.planning.actions.label_from_offset`, so ε can change without re-rendering.
+Written by `sim_world.collection.collect` (rendered in the simulator) and `controller.collection`
+(flown through the Vehicle interface: a simulated or a real vehicle), read by perception and the
+controller through `load_manifest`. The manifest stores where the target is (centre and bbox in
+pixels), the drone's pose, the split and the sector; labels are derived from the offsets with
+`controller.planning.actions.label_from_offset`, so ε can change without collecting again.
+
+`dataset.json`'s `source` says which kind of collection wrote it: "rendered" (the default: datasets
+written before flown ones existed carry no `source`) or "flown". What only a simulator knows (a row's
+`scene_seed`, `scene`, `visible_fraction`, `depth_m`, `offset_m`; `generator_version`, `seed`,
+`scene_config` in `dataset.json`) is required of a rendered dataset and optional in a flown one. A
+flown row's pixel truth is its label (the target's box tracked from the goal image, checked against
+the pose geometry: `label` holds both sources); a row whose sources disagree carries
+`label.flagged: true` and is left out by `load_manifest` unless asked for (`dronectl dataset check`
+counts it). Held-out rows (`is_held_out`): a rendered dataset's test scene seeds, a flown one's test
+time blocks (its `test` and `empty` splits).
 
 A row's own truth fields are the *named* target's (the one the instruction names and the
 protocol centres). Since scenes may hold several targets, a row also carries
@@ -38,6 +50,8 @@ DATASET_JSON = "dataset.json"
 MANIFEST = "manifest.jsonl"
 IMAGES_DIR = "images"
 
+RENDERED, FLOWN = "rendered", "flown"
+SOURCES = (RENDERED, FLOWN)
 SPLITS = ("goal", "train", "test", "empty")
 SECTORS = ("N", "NE", "E", "SE", "S", "SW", "W", "NW", "centre", "none")
 
@@ -69,7 +83,19 @@ _TARGET_FIELDS: dict[str, type | tuple[type, ...]] = {
     **_TRUTH_FIELDS,
 }
 """Each entry of a row's optional `targets` list."""
+SIMULATOR_ROW_FIELDS = ("scene_seed", "visible_fraction", "depth_m", "offset_m", "scene")
+"""Row fields only a simulator knows: required of a rendered dataset, optional in a flown one."""
+_FLOWN_ROW_FIELDS: dict[str, type | tuple[type, ...]] = {
+    "flight": int,
+    "block": int,
+    "time_s": (int, float),
+    "label": dict,
+}
+"""What a flown row carries besides the common fields: which flight and time block, the vehicle's
+clock at the capture, and the label's two sources."""
 _META_FIELDS = ("generator_version", "seed", "camera", "scene_config", "counts")
+SIMULATOR_META_FIELDS = ("generator_version", "seed", "scene_config")
+"""`dataset.json` fields only a simulator knows: required of a rendered dataset, optional in a flown one."""
 
 
 class DatasetError(ValueError):
@@ -100,11 +126,12 @@ def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
 
 
 class ManifestWriter:
-    """Appends manifest rows, one flushed line each (context manager)."""
+    """Appends manifest rows, one flushed line each (context manager). `append`: go on after the rows an
+    earlier (interrupted) collection wrote, instead of starting the file."""
 
-    def __init__(self, out_dir: Path) -> None:
+    def __init__(self, out_dir: Path, append: bool = False) -> None:
         self.path = out_dir / MANIFEST
-        self._file: TextIO = self.path.open("w", encoding="utf-8")
+        self._file: TextIO = self.path.open("a" if append else "w", encoding="utf-8")
         self.rows_written = 0
 
     def write(self, rows: Iterable[dict[str, Any]]) -> None:
@@ -179,13 +206,25 @@ def row_targets(row: dict[str, Any]) -> list[dict[str, Any]]:
         return row["targets"]
     bezel = row.get("scene", {}).get("target", {}).get("bezel_colour")
     attribute = colour_name(bezel) if isinstance(bezel, str) else None
-    return [{"kind": row["target_kind"], "attribute": attribute, **{k: row[k] for k in _TRUTH_FIELDS}}]
+    truth = {k: row[k] for k in _TRUTH_FIELDS if k in row}  # a flown row lacks what only a simulator knows
+    return [{"kind": row["target_kind"], "attribute": attribute, **truth}]
 
 
-def _check_row(row: object, where: str) -> dict[str, Any]:
+def dataset_source(meta: dict[str, Any]) -> str:
+    """ "rendered" or "flown": who wrote the dataset (`dataset.json`'s `source`; none: rendered)."""
+    return str(meta.get("source", RENDERED))
+
+
+def _check_row(row: object, where: str, source: str = RENDERED) -> dict[str, Any]:
     if not isinstance(row, dict):
         raise DatasetError(f"{where}: expected a JSON object, got {type(row).__name__}")
-    _check_fields(row, _ROW_FIELDS, where)
+    if source == RENDERED:
+        _check_fields(row, _ROW_FIELDS, where)
+    else:  # what only a simulator knows may be absent; where present it has its type
+        fields = {k: t for k, t in _ROW_FIELDS.items() if k not in SIMULATOR_ROW_FIELDS or k in row}
+        _check_fields(row, {**fields, **_FLOWN_ROW_FIELDS}, where)
+        if not isinstance(row["label"].get("flagged"), bool):
+            raise DatasetError(f"{where}: field 'label.flagged' must be true or false")
     _check_targets(row, where)
     if row["split"] not in SPLITS:
         raise DatasetError(f"{where}: field 'split' is {row['split']!r}, expected one of {SPLITS}")
@@ -199,15 +238,30 @@ def _check_row(row: object, where: str) -> dict[str, Any]:
     return row
 
 
+def is_flagged(row: dict[str, Any]) -> bool:
+    """A flown row whose two label sources disagreed: kept on disk, never trained or scored on."""
+    label = row.get("label")
+    return isinstance(label, dict) and bool(label.get("flagged", False))
+
+
+def is_held_out(row: dict[str, Any], meta: dict[str, Any]) -> bool:
+    """Whether a row belongs to the held-out part of its dataset: a rendered row of a test scene seed,
+    a flown row of a test time block (split `test` or `empty`)."""
+    if dataset_source(meta) == FLOWN:
+        return row["split"] in ("test", "empty")
+    return row.get("scene_seed") in set(meta.get("test_scene_seeds") or [])
+
+
 def load_manifest(
-    directory: str | Path, check_images: bool = True
+    directory: str | Path, check_images: bool = True, include_flagged: bool = False
 ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Read a dataset folder: (manifest rows in file order, the `dataset.json` contents).
 
     Raises `DatasetError` naming the file and line for a missing folder, a missing or
     malformed `dataset.json`, a corrupt manifest line or a row whose image is missing.
     An interrupted collection (`"complete": false`) loads with a warning, and a torn
-    final line it may have left is skipped.
+    final line it may have left is skipped. Flagged rows (a flown capture whose label sources
+    disagreed) are left out unless `include_flagged`.
     """
     root = Path(directory)
     if not root.is_dir():
@@ -223,8 +277,11 @@ def load_manifest(
         raise DatasetError(f"{meta_path}: unreadable: {exc}") from None
     if not isinstance(meta, dict):
         raise DatasetError(f"{meta_path}: expected a JSON object")
+    source = dataset_source(meta)
+    if source not in SOURCES:
+        raise DatasetError(f"{meta_path}: field 'source' is {source!r}, expected one of {SOURCES}")
     for name in _META_FIELDS:
-        if name not in meta:
+        if name not in meta and (source == RENDERED or name not in SIMULATOR_META_FIELDS):
             raise DatasetError(f"{meta_path}: missing field {name!r}")
     complete = bool(meta.get("complete", True))
 
@@ -248,10 +305,15 @@ def load_manifest(
                 logger.warning("%s: skipping a torn last line left by an interrupted collection", where)
                 break
             raise DatasetError(f"{where}: not valid JSON ({exc.msg})") from None
-        row = _check_row(row, where)
+        row = _check_row(row, where, source)
         if check_images and not (root / row["image"]).is_file():
             raise DatasetError(f"{where}: image {row['image']!r} is missing")
         rows.append(row)
     if not complete:
         logger.warning("%s: the collection was interrupted; %d rows are usable", root, len(rows))
+    if not include_flagged:
+        flagged = sum(1 for row in rows if is_flagged(row))
+        if flagged:
+            logger.info("%s: leaving out %d flagged rows (their label sources disagreed)", root, flagged)
+            rows = [row for row in rows if not is_flagged(row)]
     return rows, meta

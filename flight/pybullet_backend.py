@@ -107,6 +107,7 @@ class PyBulletVehicle(Vehicle):
             in_air=not autopilot.landed,
             flight_mode=_MODES.get(autopilot.mode, FlightMode.OTHER),
             timestamp_s=self.time_s(),
+            forward_range_m=self.world.forward_range_m(),
         )
 
     # --- commands -----------------------------------------------------------------------------

@@ -109,6 +109,9 @@ class Telemetry:
     flight_mode: FlightMode
     timestamp_s: float
     battery_remaining_percent: float | None = None
+    forward_range_m: float | None = None
+    """A forward rangefinder's latest reading (MAVLink DISTANCE_SENSOR, orientation forward), metres;
+    None without one, or when it sees nothing within its range."""
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,7 @@ import pybullet as p
 from drone_inspect_core.world_options import WindConfig
 from sim_world.physics.autopilot import Autopilot, AutopilotParams
 from sim_world.physics.quadrotor import GRAVITY_M_S2, Quadrotor, QuadrotorParams, RigidBodyState
+from sim_world.physics.rangefinder import RangefinderConfig, forward_range_m
 from sim_world.physics.wind import Wind
 from sim_world.rendering.camera import CameraConfig, ForwardCamera, Render
 from sim_world.scene.builder import Scene, SceneTarget
@@ -166,6 +167,10 @@ class World:
             target_body_id=target.body_id,
             render=render,
         )
+
+    def forward_range_m(self, config: RangefinderConfig | None = None) -> float | None:
+        """The forward rangefinder's reading now (`sim_world.physics.rangefinder`); None: out of range."""
+        return forward_range_m(self.client_id, self.state(), config or RangefinderConfig())
 
     def teleport(self, position_enu_m: tuple[float, float, float] | np.ndarray, yaw_enu_rad: float) -> None:
         """Place the drone level at a pose, at rest (data collection only: not a way to fly).

@@ -48,7 +48,8 @@ class Row:
     split: str
     target_kind: str
     offset_px: tuple[float, float]
-    scene_seed: int
+    scene_seed: int | None
+    """The rendered scene's seed; None for a flown capture."""
     in_view: bool
     targets: tuple[TargetRef, ...] = ()
     """Every target of the scene, the named one first (one entry for a single-target dataset)."""
@@ -137,7 +138,7 @@ def _row(raw: dict[str, Any], root: Path) -> Row:
         split=str(raw["split"]),
         target_kind=str(raw["target_kind"]),
         offset_px=(float(offset[0]), float(offset[1])),
-        scene_seed=int(raw["scene_seed"]),
+        scene_seed=int(raw["scene_seed"]) if "scene_seed" in raw else None,
         in_view=bool(raw["in_view"]),
         targets=_target_refs(raw),
     )

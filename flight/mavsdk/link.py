@@ -115,6 +115,7 @@ class TelemetryCache:
         self.texts: deque[str] = deque(maxlen=100)
         self.texts_received = 0  # all STATUSTEXTs so far (the deque keeps the latest only)
         self.vehicle_time_s = math.nan  # the autopilot's clock, from its ATTITUDE timestamps
+        self.forward_range_m: float | None = None
         self.link = LinkMonitor(link_timeout_s)
 
     def subscribe(self, system: Any, tel: MavsdkTelemetry) -> None:
@@ -142,6 +143,14 @@ class TelemetryCache:
         def battery(d: Any) -> None:
             self.battery_percent = None if math.isnan(d.remaining_percent) else d.remaining_percent
 
+        def distance(d: Any) -> None:
+            o = d.orientation  # MAVSDK turns MAV_SENSOR_ORIENTATION into Euler angles: forward is all zero
+            if abs(o.roll_deg) > 1.0 or abs(o.pitch_deg) > 1.0 or abs(o.yaw_deg) > 1.0:
+                return  # a downward (height) or sideways sensor: not the one that sees the target
+            current = d.current_distance_m
+            in_range = d.minimum_distance_m <= current <= d.maximum_distance_m
+            self.forward_range_m = float(current) if in_range else None
+
         def status_text(d: Any) -> None:
             self.texts.append(f"{d.type.name}: {d.text}")
             self.texts_received += 1
@@ -156,6 +165,7 @@ class TelemetryCache:
         tel.subscribe_health(store(health))
         tel.subscribe_battery(store(battery))
         tel.subscribe_status_text(store(status_text))
+        tel.subscribe_distance_sensor(store(distance))
         system.subscribe_is_connected(lambda connected, _ud: self.link.set_connected(bool(connected)))
 
     def snapshot(self, timestamp_s: float) -> Telemetry:
@@ -169,6 +179,7 @@ class TelemetryCache:
                 flight_mode=self.mode,
                 timestamp_s=timestamp_s,
                 battery_remaining_percent=self.battery_percent,
+                forward_range_m=self.forward_range_m,
             )
 
     def all_texts(self) -> list[str]:

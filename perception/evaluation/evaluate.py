@@ -26,7 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 from drone_inspect_core.centring import default_epsilon_px, is_centred
-from drone_inspect_core.dataset import DatasetError, load_manifest, read_image_rgb
+from drone_inspect_core.dataset import DatasetError, is_held_out, load_manifest, read_image_rgb
 from drone_inspect_core.stats import Rate, quantile_interval
 from perception.detector import Detector
 from perception.types import Detection
@@ -201,17 +201,15 @@ def select_rows(
 ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """The rows to evaluate on and `dataset.json`.
 
-    `empty` rows are taken only from test scene seeds (all of them, as `dronectl
-    collect` plans them), so a training set's scenes never inflate the figures.
+    `empty` rows are taken only from the held-out part (`drone_inspect_core.dataset.is_held_out`: test
+    scene seeds, all of them as `dronectl collect` plans them; a flown dataset's test time blocks), so a
+    training set's scenes never inflate the figures.
     """
     root = Path(data_dir)
     rows, meta = load_manifest(root)
-    test_seeds = set(meta.get("test_scene_seeds") or [])
     chosen: list[dict[str, Any]] = []
     for split in splits:
-        picked = [
-            r for r in rows if r["split"] == split and (split != "empty" or r["scene_seed"] in test_seeds)
-        ]
+        picked = [r for r in rows if r["split"] == split and (split != "empty" or is_held_out(r, meta))]
         chosen += picked[:limit_per_split] if limit_per_split is not None else picked
     if not chosen:
         raise DatasetError(f"{root}: no rows in splits {list(splits)}")

@@ -79,8 +79,8 @@ def load_samples(
         r
         for r in rows
         if r["split"] in splits
-        and (scene_seeds is None or r["scene_seed"] in scene_seeds)
-        and (exclude_seeds is None or r["scene_seed"] not in exclude_seeds)
+        and (scene_seeds is None or r.get("scene_seed") in scene_seeds)
+        and (exclude_seeds is None or r.get("scene_seed") not in exclude_seeds)
     ]
     if limit is not None:
         chosen = chosen[:limit]

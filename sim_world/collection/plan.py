@@ -22,32 +22,14 @@ from pathlib import Path
 
 import numpy as np
 
-from drone_inspect_core.centring import axis_signs, default_epsilon_px
+from drone_inspect_core.centring import SECTOR_DIRECTIONS, default_epsilon_px, sector_of_offset
 from sim_world.physics.quadrotor import RigidBodyState
 from sim_world.rendering.camera import CameraConfig, ForwardCamera, Intrinsics
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfig
 from sim_world.world import FACING_WALL_YAW_ENU_RAD
 
-SECTOR_DIRECTIONS: dict[str, tuple[int, int]] = {
-    "N": (0, 1),
-    "NE": (1, 1),
-    "E": (1, 0),
-    "SE": (1, -1),
-    "S": (0, -1),
-    "SW": (-1, -1),
-    "W": (-1, 0),
-    "NW": (-1, 1),
-}
-"""(sx, sz): sx = +1 target right of centre (du > ε), sz = +1 target above centre (dv < −ε)."""
-SECTORS = tuple(SECTOR_DIRECTIONS)
-
-
-def sector_of_offset(du_px: float, dv_px: float, epsilon_px: float) -> str:
-    """The sector of an offset under the ε bands ('centre' when within ε on both axes)."""
-    sx, sz = axis_signs(du_px, dv_px, epsilon_px)  # the ε rule (drone_inspect_core.centring), written once
-    if sx == 0 and sz == 0:
-        return "centre"
-    return next(name for name, d in SECTOR_DIRECTIONS.items() if d == (sx, sz))
+SECTORS = tuple(SECTOR_DIRECTIONS)  # the ε rule's sectors (drone_inspect_core.centring), written once
+__all__ = ["SECTORS", "SECTOR_DIRECTIONS", "sector_of_offset"]  # re-exported: the collection's vocabulary
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,8 @@ Each tick of `sensor_period_s` (4 ms) of simulated time:
 3. wait for PX4's HIL_ACTUATOR_CONTROLS for that time (lockstep: PX4's clock is the
    sensor time, so PX4 never misses a deadline however slow this loop is);
 4. turn the motor outputs into rotor speed commands and step the physics one tick;
-5. hand the pose to the camera every 1/`camera_fps` of simulated time;
+5. hand the pose to the camera every 1/`camera_fps` of simulated time; the forward rangefinder goes to
+   PX4 as DISTANCE_SENSOR every `range_every` ticks (PX4 streams it on to its clients);
 6. with a finite `speed`, sleep until the wall clock catches up (× speed).
 
 Before PX4's first answer (it is still booting) the loop waits a short while for
@@ -31,6 +32,7 @@ from sim_world.px4_bridge.link import Px4DisconnectedError, SimulatorServer
 from sim_world.px4_bridge.messages import ActuatorCommand, HilEncoder, RotorMapping
 from sim_world.px4_bridge.sensors import SensorSuite, Truth
 from sim_world.sitl.rig import CameraClock, TruthReader
+from sim_world.vehicle.telemetry import distance_sensor_message
 from sim_world.world import World
 
 log = logging.getLogger(__name__)
@@ -50,6 +52,7 @@ class BridgeTiming:
     baro_every: int = 5  # 50 Hz
     gps_every: int = 25  # 10 Hz
     truth_every: int = 5  # HIL_STATE_QUATERNION at 50 Hz
+    range_every: int = 25  # DISTANCE_SENSOR (the forward rangefinder) at 10 Hz
     camera_fps: float = 30.0
     speed: float | None = 1.0  # simulated s per wall s; None: as fast as PX4 and the physics go
     boot_answer_wait_s: float = 0.005  # before PX4's first answer
@@ -63,7 +66,7 @@ class BridgeTiming:
             raise ValueError(f"speed must be in [0.05, 100] or None (as fast as possible), got {self.speed}")
         if not 1.0 <= self.camera_fps <= 120.0:
             raise ValueError(f"camera_fps must be in [1, 120], got {self.camera_fps}")
-        if min(self.mag_every, self.baro_every, self.gps_every, self.truth_every) < 1:
+        if min(self.mag_every, self.baro_every, self.gps_every, self.truth_every, self.range_every) < 1:
             raise ValueError("sensor rate dividers must be >= 1")
 
 
@@ -172,6 +175,9 @@ class Px4Bridge:
                     self._time_usec, truth, self.home.to_global(north, east, down)
                 )
             )
+        if tick % timing.range_every == 0:
+            message = distance_sensor_message(round(world.time_s * 1000), world.forward_range_m())
+            out.append(self._encoder.pack(message))
         self.server.send(b"".join(out))
         self._await_answer(self._time_usec)
         rotors = self.mapping.rotor_speeds(self._command)

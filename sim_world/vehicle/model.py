@@ -29,6 +29,8 @@ class Kinematics:
     pitch_rad: float
     yaw_rad: float  # NED yaw: from north, clockwise
     rates_frd_rad_s: np.ndarray  # (3,) body roll, pitch, yaw rates
+    forward_range_m: float | None = None
+    """The forward rangefinder's reading (None: nothing in range, or an airframe without one)."""
 
 
 @dataclass(frozen=True)

@@ -33,8 +33,11 @@ DEFAULT_RATES_HZ: dict[int, float] = {
     M.MAVLINK_MSG_ID_GPS_RAW_INT: 5.0,
     M.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,
     M.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    M.MAVLINK_MSG_ID_DISTANCE_SENSOR: 10.0,  # PX4's rate on its onboard link
     M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: 0.0,  # on request only
 }
+RANGEFINDER_MIN_CM, RANGEFINDER_MAX_CM = 10, 1200
+"""The forward rangefinder's limits as DISTANCE_SENSOR reports them (`sim_world.physics.rangefinder`)."""
 
 _SENSORS = (
     M.MAV_SYS_STATUS_SENSOR_3D_GYRO
@@ -111,6 +114,7 @@ class TelemetryBuilder:
             M.MAVLINK_MSG_ID_GPS_RAW_INT: self.gps_raw_int,
             M.MAVLINK_MSG_ID_BATTERY_STATUS: self.battery_status,
             M.MAVLINK_MSG_ID_HOME_POSITION: self.home_position,
+            M.MAVLINK_MSG_ID_DISTANCE_SENSOR: self.distance_sensor,
             M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self.autopilot_version,
         }
 
@@ -189,12 +193,30 @@ class TelemetryBuilder:
             0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, snap.time_boot_ms * 1000,
         )  # fmt: skip
 
+    def distance_sensor(self, snap: VehicleSnapshot) -> mavlink.MAVLink_message:
+        """The forward rangefinder (orientation ROTATION_NONE = forward); beyond its maximum when it
+        sees nothing, as a real one reports no return."""
+        return distance_sensor_message(snap.time_boot_ms, snap.kinematics.forward_range_m)
+
     def autopilot_version(self, snap: VehicleSnapshot) -> mavlink.MAVLink_message:
         major, minor, patch = PX4_VERSION
         sw = major << 24 | minor << 16 | patch << 8 | M.FIRMWARE_VERSION_TYPE_OFFICIAL
         return M.MAVLink_autopilot_version_message(
             _CAPABILITIES, sw, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, self.uid,
         )  # fmt: skip
+
+
+def distance_sensor_message(time_boot_ms: int, range_m: float | None) -> mavlink.MAVLink_message:
+    """DISTANCE_SENSOR of a forward laser rangefinder reading `range_m` (None: no return, sent as one
+    centimetre beyond the maximum with signal quality 1, the lowest)."""
+    if range_m is None or not math.isfinite(range_m):
+        current, quality = RANGEFINDER_MAX_CM + 1, 1
+    else:
+        current, quality = min(max(round(range_m * 100), RANGEFINDER_MIN_CM), RANGEFINDER_MAX_CM), 100
+    return M.MAVLink_distance_sensor_message(
+        time_boot_ms, RANGEFINDER_MIN_CM, RANGEFINDER_MAX_CM, current, M.MAV_DISTANCE_SENSOR_LASER, 0,
+        M.MAV_SENSOR_ROTATION_NONE, 1, signal_quality=quality,
+    )  # fmt: skip
 
 
 def _clip_i16(value: int) -> int:

@@ -44,6 +44,7 @@ class WorldVehicleModel:
             pitch_rad=-s.pitch_enu_rad,  # FLU pitch lowers the nose, FRD pitch raises it
             yaw_rad=yaw_enu_to_ned_rad(s.yaw_enu_rad),
             rates_frd_rad_s=flu_to_frd(s.angular_velocity_flu_rad_s),
+            forward_range_m=self.world.forward_range_m(),
         )
 
     def status(self) -> AutopilotStatus:

@@ -17,7 +17,11 @@ from flight.signals import stop_signals_as_interrupt
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("dronectl.demo_cmd", "fly a short scripted demo in the simulated world and save camera frames"),
-    "collect": ("dronectl.collect_cmd", "collect a goal/sector/test image dataset in the simulated world"),
+    "collect": (
+        "dronectl.collect_cmd",
+        "collect a goal/sector/test image dataset: rendered in the simulated world, or flown (--vehicle)",
+    ),
+    "dataset": ("dronectl.dataset_cmd", "`dataset check DIR`: validate a dataset folder and count it"),
     "bench": ("dronectl.bench_cmd", "benchmarks: `bench sim|perception|flight`"),
     "sim-vehicle": (
         "dronectl.sim_vehicle_cmd",

@@ -9,6 +9,9 @@ test, empty) is taken relative to the named one, and every row lists all targets
 
 Writes DIR/images/*.png, DIR/manifest.jsonl (truth per image) and DIR/dataset.json
 (camera, scene config, seeds); see docs/architecture.md.
+
+With --vehicle (sim-mavlink, px4-sitl or a MAVLink URL) the protocol is flown instead, through the
+Vehicle interface: `dronectl collect --vehicle sim-mavlink --help` (docs/own-target.md).
 """
 
 from __future__ import annotations
@@ -73,6 +76,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str]) -> int:
+    if any(arg == "--vehicle" or arg.startswith("--vehicle=") for arg in argv):
+        from dronectl.collect_flown_cmd import (
+            main as collect_flown_main,
+        )  # flown through the Vehicle interface
+
+        return collect_flown_main(argv)
     args = build_parser().parse_args(argv)
     from drone_inspect_core.dataset import DatasetError
     from drone_inspect_core.parallel import RayUnavailableError

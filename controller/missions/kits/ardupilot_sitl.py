@@ -21,10 +21,11 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels
+from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, OpenedVehicle
 from controller.missions.kits.simulated import (
     SIM_HFOV_DEG,
     SimTruth,
+    SimulatedVehicle,
     new_system_id,
     simulated_mavlink_kit,
     simulated_world_fields,
@@ -78,6 +79,13 @@ def open_ardupilot_sitl_kit(
     mission: Mission, out_dir: Path, models: LoadedModels | None = None
 ) -> Iterator[FlightKit]:
     """ArduPilot SITL + bridge (a child), tlog relay, GUIDED backend, MJPEG camera, detector, planner."""
+    with open_ardupilot_sitl(mission, out_dir) as sim:
+        yield simulated_mavlink_kit(mission, models, sim)
+
+
+@contextmanager
+def open_ardupilot_sitl(mission: Mission, out_dir: Path) -> Iterator[SimulatedVehicle]:
+    """ArduPilot SITL and its bridge (a child), the .tlog relay, the GUIDED backend and the MJPEG camera."""
     out_dir.mkdir(parents=True, exist_ok=True)
     system_id = new_system_id()  # this run's ArduPilot, and no other
     with ExitStack() as stack:
@@ -119,8 +127,8 @@ def open_ardupilot_sitl_kit(
         o = config.start_offset
         assert o is not None
         start = o
-        yield simulated_mavlink_kit(
-            mission, models, vehicle, camera, truth, config.scene, start,
+        opened = OpenedVehicle(
+            vehicle, camera,
             info={
                 "backend": "ArduPilot SITL (real firmware) flying the PyBullet world; GUIDED + MJPEG",
                 "ardupilot_dir": str(config.ardupilot_dir),
@@ -139,3 +147,4 @@ def open_ardupilot_sitl_kit(
             },
             tlog=tlog,
         )  # fmt: skip
+        yield SimulatedVehicle(opened, truth, config.scene, mission.scene.seed, start)

@@ -1,8 +1,10 @@
-"""`FlightKit`: the components one centring flight needs, however they were built.
+"""`FlightKit`: the components one centring flight needs, however they were built; `OpenedVehicle`: the part
+of it that every flight over MAVLink opens first (a vehicle and its camera).
 
-`controller.missions.runner` builds one per mission backend (in-process sim,
+`controller.missions.runner` builds a kit per mission backend (in-process sim,
 sim-vehicle over MAVLink, a real vehicle); tests build one from fakes. The loop
-and the report see only this, never the backend.
+and the report see only this, never the backend. A flown collection
+(`controller.collection`) opens only the vehicle and its camera (`OpenedVehicle`), the same way.
 """
 
 from __future__ import annotations
@@ -31,6 +33,17 @@ class TlogRecording(Protocol):
 
     @property
     def recording_error(self) -> str | None: ...
+
+
+@dataclass
+class OpenedVehicle:
+    """A vehicle and its camera, open, with what a report says about them: the first half of every kit over
+    MAVLink (sim-vehicle, PX4 SITL, a real vehicle), and all that a flown collection needs."""
+
+    vehicle: Vehicle
+    camera: Camera
+    info: dict[str, Any]
+    tlog: TlogRecording | None = None
 
 
 @dataclass

@@ -20,10 +20,11 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels
+from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, OpenedVehicle
 from controller.missions.kits.simulated import (
     SIM_HFOV_DEG,
     SimTruth,
+    SimulatedVehicle,
     new_system_id,
     simulated_mavlink_kit,
     simulated_world_fields,
@@ -69,6 +70,13 @@ def open_px4_sitl_kit(
     mission: Mission, out_dir: Path, models: LoadedModels | None = None
 ) -> Iterator[FlightKit]:
     """PX4 SITL + bridge (child process) + tlog relay + MAVSDK + MJPEG camera + detector + planner."""
+    with open_px4_sitl(mission, out_dir) as sim:
+        yield simulated_mavlink_kit(mission, models, sim)
+
+
+@contextmanager
+def open_px4_sitl(mission: Mission, out_dir: Path) -> Iterator[SimulatedVehicle]:
+    """PX4 SITL and the bridge (a child process), the .tlog relay, MAVSDK and the MJPEG camera."""
     out_dir.mkdir(parents=True, exist_ok=True)
     system_id = new_system_id()  # this run's PX4, and no other
     with ExitStack() as stack:
@@ -104,9 +112,8 @@ def open_px4_sitl_kit(
             )
         )
         camera = stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
-        start = config.start_offset
-        yield simulated_mavlink_kit(
-            mission, models, vehicle, camera, truth, config.scene, start,
+        opened = OpenedVehicle(
+            vehicle, camera,
             info={
                 "backend": "PX4 SITL (real firmware) flying the PyBullet world; MAVSDK + MJPEG",
                 "px4_dir": str(config.px4_dir),
@@ -125,3 +132,4 @@ def open_px4_sitl_kit(
             },
             tlog=tlog,
         )  # fmt: skip
+        yield SimulatedVehicle(opened, truth, config.scene, mission.scene.seed, config.start_offset)

@@ -19,11 +19,13 @@ from controller.missions.kits.base import (
     TLOG_NAME,
     FlightKit,
     LoadedModels,
+    OpenedVehicle,
     image_detector_for,
     planner_for,
 )
 from controller.missions.schema import Mission
 from flight.autopilots import MavlinkVehicle
+from flight.link_faults import LinkFaults
 from flight.relay import MavlinkRelay
 from flight.urls import udpin_address
 from perception.stream_camera import StreamCamera
@@ -36,8 +38,33 @@ REAL_CLIENT_PORT_SHIFT = 1000
 @contextmanager
 def open_real_kit(mission: Mission, out_dir: Path, models: LoadedModels | None = None) -> Iterator[FlightKit]:
     """A vehicle at `mission.vehicle` and its camera stream; no truth. Fails fast on a bad URL."""
+    faults = mission.faults.link_faults()
+    with open_real_vehicle(mission.vehicle, mission.camera, out_dir, mission.autopilot, faults) as opened:
+        frame = opened.camera.read()
+        yield FlightKit(
+            vehicle=opened.vehicle,
+            camera=opened.camera,
+            detector=image_detector_for(mission, models),
+            planner=planner_for(mission, models, None),
+            instruction=mission.instruction_text(mission.target_kind, mission.target_attribute),
+            info=opened.info,
+            tlog=opened.tlog,
+            image_width_px=frame.width,
+        )
+
+
+@contextmanager
+def open_real_vehicle(
+    vehicle_url: str,
+    camera_url: str,
+    out_dir: Path,
+    autopilot: str = "auto",
+    faults: LinkFaults | None = None,
+) -> Iterator[OpenedVehicle]:
+    """The vehicle at `vehicle_url` (behind the .tlog relay for a udpin:// link; its autopilot's backend,
+    `flight.autopilots.MavlinkVehicle`) and the camera stream."""
     with ExitStack() as stack:
-        url = mission.vehicle
+        url = vehicle_url
         tlog = None
         address = udpin_address(url)
         if address is not None:
@@ -45,32 +72,18 @@ def open_real_kit(mission: Mission, out_dir: Path, models: LoadedModels | None =
             # autopilot heard there; MAVSDK listens behind it on loopback, REAL_CLIENT_PORT_SHIFT higher.
             host, port = address
             relay = MavlinkRelay(
-                port,
-                port + REAL_CLIENT_PORT_SHIFT,
-                out_dir / TLOG_NAME,
-                listen_host=host,
-                faults=mission.faults.link_faults(),
+                port, port + REAL_CLIENT_PORT_SHIFT, out_dir / TLOG_NAME, listen_host=host, faults=faults
             )
             tlog = stack.enter_context(relay)
             url = f"udpin://127.0.0.1:{port + REAL_CLIENT_PORT_SHIFT}"
         else:
             log.warning("%s is not a udpin:// link: flying without a .tlog", url)
-        vehicle = stack.enter_context(MavlinkVehicle(url, mission.autopilot, shown_url=mission.vehicle))
-        camera = stack.enter_context(StreamCamera(mission.camera, timeout_s=3.0, open_timeout_s=10.0))
-        planner = planner_for(mission, models, None)
-        frame = camera.read()
-        yield FlightKit(
-            vehicle=vehicle,
-            camera=camera,
-            detector=image_detector_for(mission, models),
-            planner=planner,
-            instruction=mission.instruction_text(mission.target_kind, mission.target_attribute),
-            info={
-                "backend": "MAVLink (MAVSDK for PX4, GUIDED for ArduPilot) + stream camera",
-                "autopilot": mission.autopilot,
-                "vehicle": mission.vehicle,
-                "camera": mission.camera,
-            },
-            tlog=tlog,
-            image_width_px=frame.width,
-        )
+        vehicle = stack.enter_context(MavlinkVehicle(url, autopilot, shown_url=vehicle_url))
+        camera = stack.enter_context(StreamCamera(camera_url, timeout_s=3.0, open_timeout_s=10.0))
+        info = {
+            "backend": "MAVLink (MAVSDK for PX4, GUIDED for ArduPilot) + stream camera",
+            "autopilot": autopilot,
+            "vehicle": vehicle_url,
+            "camera": camera_url,
+        }
+        yield OpenedVehicle(vehicle, camera, info, tlog)

@@ -16,18 +16,19 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels
+from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, OpenedVehicle
 from controller.missions.kits.simulated import (
     SIM_HFOV_DEG,
     SimTruth,
+    SimulatedVehicle,
     new_system_id,
     simulated_mavlink_kit,
     simulated_world_fields,
 )
 from controller.missions.schema import Mission
+from drone_inspect_core.world_options import StartPose
 from controller.missions.setup import start_offset_for
 from drone_inspect_core.ports import check_free, free_port
-from drone_inspect_core.world_options import StartPose
 from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
 from flight.sim_launcher import SimulatorProcess
@@ -64,6 +65,13 @@ def open_sim_mavlink_kit(
     mission: Mission, out_dir: Path, models: LoadedModels | None = None
 ) -> Iterator[FlightKit]:
     """sim-vehicle subprocess + tlog relay + MAVSDK + MJPEG stream camera + detector + planner."""
+    with open_sim_mavlink(mission, out_dir) as sim:
+        yield simulated_mavlink_kit(mission, models, sim)
+
+
+@contextmanager
+def open_sim_mavlink(mission: Mission, out_dir: Path) -> Iterator[SimulatedVehicle]:
+    """The mission's sim-vehicle (a subprocess), the .tlog relay, MAVSDK and the MJPEG stream camera."""
     start = start_offset_for(mission, SIM_HFOV_DEG, SIM_HFOV_DEG)  # square image
     out_dir.mkdir(parents=True, exist_ok=True)
     system_id = new_system_id()
@@ -104,8 +112,8 @@ def open_sim_mavlink_kit(
             )
         )
         camera = stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
-        yield simulated_mavlink_kit(
-            mission, models, vehicle, camera, truth, run.scene, start,
+        opened = OpenedVehicle(
+            vehicle, camera,
             info={
                 "backend": "sim-vehicle subprocess over MAVLink (MAVSDK) + MJPEG stream",
                 "ports": {
@@ -121,3 +129,4 @@ def open_sim_mavlink_kit(
             },
             tlog=tlog,
         )  # fmt: skip
+        yield SimulatedVehicle(opened, truth, run.scene, mission.scene.seed, start)

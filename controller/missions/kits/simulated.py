@@ -11,22 +11,21 @@ import json
 import logging
 import secrets
 import urllib.request
+from dataclasses import dataclass, field
 from typing import Any
 
 from controller.missions.kits.base import (
     FlightKit,
     LoadedModels,
-    TlogRecording,
+    OpenedVehicle,
     image_detector_for,
     named_target,
     planner_for,
 )
 from controller.missions.schema import Mission
+from drone_inspect_core.world_options import StartPose
 from controller.missions.setup import scene_config_for, wind_config_for
 from drone_inspect_core.vocabulary import colour_name
-from drone_inspect_core.world_options import StartPose
-from flight.vehicle import Vehicle
-from perception.stream_camera import StreamCamera
 from sim_world.rendering.camera import CameraConfig
 from sim_world.scene.config import SceneConfig
 from sim_world.scene.sampling import sample_scene
@@ -83,6 +82,16 @@ class SimTruth:
     def ground_height_m(self) -> float:
         return float(_get_json(self.url)["truth"]["drone"]["position_enu_m"][2])
 
+    def frame(self) -> dict[str, Any] | None:
+        """The latest frame's whole truth (`sim_world.rendering.video.frame_truth`: the target in pixels,
+        the drone's true pose) with its `frame_number`; None when unreachable."""
+        try:
+            answer = _get_json(self.url)
+            return {"frame_number": answer["frame_number"], **answer["truth"]}
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            log.warning("no truth from %s: %s", self.url, exc)
+            return None
+
 
 def simulated_world_fields(mission: Mission, start: StartPose) -> dict[str, Any]:
     """What every simulator a mission launches is told about its world (sim-vehicle and the PX4 bridge
@@ -102,48 +111,70 @@ def new_system_id() -> int:
     return 10 + secrets.randbelow(240)
 
 
-def simulated_mavlink_kit(
-    mission: Mission,
-    models: LoadedModels | None,
-    vehicle: Vehicle,
-    camera: StreamCamera,
-    truth: SimTruth,
-    scene: SceneConfig,
-    start: StartPose,
-    info: dict[str, Any],
-    tlog: TlogRecording | None,
-) -> FlightKit:
-    """The kit of a simulated vehicle flown over MAVLink (sim-vehicle, PX4 SITL): it starts landed below
-    the mission's start pose, so the takeoff climbs to the pose's height; truth judges, never flies."""
-    sampled = sample_scene(scene, mission.scene.seed)  # numbers only: the simulator's own draw
-    target = sampled.target
+@dataclass
+class SimulatedVehicle:
+    """A simulated vehicle flown over MAVLink (sim-vehicle, PX4 SITL), open: the vehicle and camera as a
+    real one's, the simulator's truth (judging and records only, never flying), its scene and seed, and
+    the start pose it was placed below (landed)."""
+
+    opened: OpenedVehicle
+    truth: SimTruth
+    scene: SceneConfig
+    seed: int
+    start: StartPose
+    _ground_m: float | None = field(default=None, init=False, repr=False)
+
+    def ground_height_m(self) -> float:
+        """The drone's height resting on the ground (read from the truth once, before it takes off)."""
+        if self._ground_m is None:
+            self._ground_m = self.truth.ground_height_m()
+        return self._ground_m
+
+    def takeoff_climb_m(self) -> float:
+        """The climb from the ground to the start pose's height (PX4's minimum at the least)."""
+        target = sample_scene(self.scene, self.seed).target  # numbers only: the simulator's own draw
+        climb_m = target.height_m + self.start.up_m - self.ground_height_m()
+        if climb_m < PX4_MIN_TAKEOFF_ALT_M:
+            log.warning(
+                "start %.2f m above ground: taking off to PX4's minimum %.1f m",
+                climb_m,
+                PX4_MIN_TAKEOFF_ALT_M,
+            )
+            climb_m = PX4_MIN_TAKEOFF_ALT_M
+        return climb_m
+
+    def centred_offset_m(self, climb_m: float) -> tuple[float, float]:
+        """Where the pose that centres the named target lies from the pose a takeoff of `climb_m` from the
+        start reaches: (right, up) metres in the start's heading frame (same distance from the wall)."""
+        height_m = sample_scene(self.scene, self.seed).target.height_m - self.ground_height_m()
+        return -self.start.right_m, height_m - climb_m
+
+
+def simulated_mavlink_kit(mission: Mission, models: LoadedModels | None, sim: SimulatedVehicle) -> FlightKit:
+    """The kit of a simulated vehicle flown over MAVLink (sim-vehicle, PX4 SITL): it starts landed below the
+    mission's start pose, so the takeoff climbs to the pose's height; truth judges, never flies."""
+    sampled = sample_scene(sim.scene, mission.scene.seed)  # numbers only: the simulator's own draw
     instruction, query = named_target(
         mission, [(t.kind, colour_name(t.bezel_colour)) for t in sampled.targets]
     )
-    climb_m = target.height_m + start.up_m - truth.ground_height_m()
-    if climb_m < PX4_MIN_TAKEOFF_ALT_M:
-        log.warning(
-            "start %.2f m above ground: taking off to PX4's minimum %.1f m", climb_m, PX4_MIN_TAKEOFF_ALT_M
-        )
-        climb_m = PX4_MIN_TAKEOFF_ALT_M
-    planner = planner_for(mission, models, truth.offset_px)
+    truth = sim.truth
     return FlightKit(
-        vehicle=vehicle,
-        camera=camera,
+        vehicle=sim.opened.vehicle,
+        camera=sim.opened.camera,
         detector=image_detector_for(mission, models),
-        planner=planner,
+        planner=planner_for(mission, models, truth.offset_px),
         instruction=instruction,
         target=query,
         truth_probe=truth.offset_px,
         truth_extremes=truth.extremes,
         targets_truth=truth.targets_offsets,
-        takeoff_altitude_m=climb_m,
+        takeoff_altitude_m=sim.takeoff_climb_m(),
         info={
             "scene_seed": mission.scene.seed,
-            "target_kind": target.kind,
-            "start": start.model_dump(),
-            **info,
+            "target_kind": sampled.target.kind,
+            "start": sim.start.model_dump(),
+            **sim.opened.info,
         },
-        tlog=tlog,
+        tlog=sim.opened.tlog,
         image_width_px=SIM_IMAGE_PX,
     )

@@ -1,0 +1,233 @@
+"""Getting to the goal pose and recording it: `--goal here`, `--goal scene` (simulated), `--goal FILE`.
+
+- here: the operator has brought the vehicle to the centred pose (by hand, or with `dronectl move`); it
+  must be in the air. Offboard is taken from a hover with a zero setpoint.
+- scene (a simulated vehicle): take off, fly to the scene's centred pose as an operator would, and centre
+  the target by the image (the detector's box, a few small moves through the pose geometry), then the
+  same as `here`.
+- FILE (and `--resume`): the goal of an earlier collection. Take off if on the ground, fly to its pose,
+  and check with the image that the target is where the goal image had it: a vehicle whose local frame
+  moved (another takeoff spot, a reset estimator) is refused, not flown around a wrong goal.
+
+Recording: settle, average the pose over a moment, take the goal image, the target's box in it (the
+operator's `--goal-box`, else the detector's for a kind it knows) and its distance (`--distance-m`, else the
+forward rangefinder's median over a moment).
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import math
+import statistics
+import time
+from typing import Any
+
+import cv2
+import numpy as np
+
+from controller.collection.config import FlownCollectConfig
+from controller.collection.goal import GoalRecord
+from controller.collection.pose_flight import PoseControl, fly_to, pose_of, wait_settled
+from flight.moves import take_off_to_start
+from flight.types import VelocityBody
+from flight.vehicle import Vehicle
+from perception.camera import Camera
+from perception.camera_model import CameraModel, PoseNed
+from perception.target_tracker import TemplateTracker
+from perception.types import Frame
+
+log = logging.getLogger(__name__)
+
+SAMPLE_S = 0.6
+"""How long the goal pose and the rangefinder are averaged over."""
+CENTRING_MOVES = 3
+DETECTOR_FRAMES = 3
+"""Frames the detector is tried on before the goal box must be given (`--goal-box`)."""
+
+
+class GoalError(RuntimeError):
+    """The goal cannot be recorded or reached (the message says what to do)."""
+
+
+def fresh_frame(camera: Camera, after_s: float, timeout_s: float = 3.0) -> Frame:
+    """The first frame that arrived after `after_s` (time.monotonic()): a picture taken once settled."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        frame = camera.read(timeout_s=max(0.1, deadline - time.monotonic()))
+        if frame.timestamp_s >= after_s:
+            return frame
+        if time.monotonic() > deadline:
+            return frame  # the stream is slow but alive: the newest frame is still taken after settling
+
+
+def take_offboard_here(vehicle: Vehicle) -> None:
+    """`--goal here`: the vehicle is hovering where the operator left it; take offboard without moving."""
+    vehicle.wait_ready()
+    if not vehicle.telemetry().in_air:
+        raise GoalError(
+            "--goal here: the vehicle is on the ground; fly it to the pose that centres the target first "
+            "(by hand, or with `dronectl move`), then run collect again"
+        )
+    vehicle.set_velocity_body(VelocityBody())
+    vehicle.start_offboard()
+
+
+def climb_to(vehicle: Vehicle, down_m: float, clock: dict[str, float]) -> None:
+    """From the ground (or the air) into an offboard hover near the height of `down_m` (local NED)."""
+    telemetry = vehicle.telemetry()
+    if telemetry.in_air:
+        vehicle.set_velocity_body(VelocityBody())
+        vehicle.start_offboard()
+        return
+    altitude_m = max(0.5, telemetry.position_ned.down_m - down_m)
+    take_off_to_start(vehicle, altitude_m, None, clock)
+
+
+def sample_goal_pose(vehicle: Vehicle) -> tuple[PoseNed, float | None]:
+    """The pose averaged over `SAMPLE_S` (yaw by its circular mean) and the rangefinder's median."""
+    poses, ranges = [], []
+    end_s = vehicle.time_s() + SAMPLE_S
+    while vehicle.time_s() < end_s:
+        telemetry = vehicle.telemetry()
+        poses.append(pose_of(telemetry))
+        if telemetry.forward_range_m is not None:
+            ranges.append(telemetry.forward_range_m)
+        vehicle.sleep(0.05)
+    position = np.mean([p.position for p in poses], axis=0)
+    yaw = math.degrees(
+        math.atan2(
+            sum(math.sin(math.radians(p.yaw_deg)) for p in poses),
+            sum(math.cos(math.radians(p.yaw_deg)) for p in poses),
+        )
+    )
+    pose = PoseNed(float(position[0]), float(position[1]), float(position[2]), yaw)
+    return pose, statistics.median(ranges) if len(ranges) >= max(1, len(poses) // 3) else None
+
+
+def goal_box(config: FlownCollectConfig, image: np.ndarray) -> tuple[tuple[float, float, float, float], str]:
+    """The target's box in the goal image: the operator's, else the detector's for the kind. When the
+    detector finds none, the image is left as `goal_candidate.png` in the output folder to read a box off."""
+    height, width = image.shape[:2]
+    if config.goal_box_px is not None:
+        x, y, w, h = config.goal_box_px
+        if x + w > width or y + h > height:
+            raise GoalError(
+                f"--goal-box {x:g},{y:g},{w:g},{h:g} does not lie inside the {width}x{height} image"
+            )
+        return (x, y, x + w, y + h), "given"
+    detector = shipped_detector()
+    detections = [d for d in detector.detect_all(image) if d.kind == config.kind]
+    if not detections:
+        candidate = config.out_dir / "goal_candidate.png"
+        cv2.imwrite(str(candidate), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+        raise GoalError(
+            f"the detector found no {config.kind} in the goal image ({candidate}; it knows "
+            f"{', '.join(detector.config.kinds)}): give the target's box with --goal-box x,y,w,h"
+        )
+    best = max(detections, key=lambda d: d.confidence)
+    return tuple(float(v) for v in best.bbox_px), "detector"  # type: ignore[return-value]
+
+
+@functools.cache
+def shipped_detector() -> Any:
+    """The shipped image detector, loaded once. Load it on the ground (`collect_flown` does, when the goal
+    box is the detector's): torch's import and the ONNX export hold Python's lock for seconds, during which
+    MAVSDK's callback thread waits and its setpoint stream with it, and PX4 (and the sim-vehicle) fail safe
+    out of offboard."""
+    from perception.image_detector import ImageDetector  # torch: loaded only when the detector is asked
+
+    return ImageDetector.shipped()
+
+
+def record_goal(
+    vehicle: Vehicle, camera: Camera, model: CameraModel, config: FlownCollectConfig
+) -> GoalRecord:
+    """Settle, then the goal pose, image, box and distance (`GoalError` naming what is missing)."""
+    settled, _ = wait_settled(vehicle, config.settling)
+    if not settled:
+        log.warning("not settled at the goal within %.0f s: recording it as it is", config.settling.timeout_s)
+    pose, range_m = sample_goal_pose(vehicle)
+    frame = fresh_frame(camera, time.monotonic())
+    if (frame.width, frame.height) != (model.width, model.height):
+        raise GoalError(
+            f"the camera sends {frame.width}x{frame.height} px images, the camera model says "
+            f"{model.width}x{model.height}: fix the camera file"
+        )
+    for attempt in range(1, DETECTOR_FRAMES + 1):
+        try:
+            box, box_source = goal_box(config, frame.image)
+            break
+        except GoalError:
+            if attempt == DETECTOR_FRAMES:
+                raise
+            log.info("no %s detected in the goal frame: trying the next frame", config.kind)
+            frame = fresh_frame(camera, time.monotonic())
+    if config.distance_m is not None:
+        depth, source = config.distance_m, "given"
+    elif range_m is not None:
+        depth, source = range_m, "rangefinder"
+    else:
+        raise GoalError(
+            "no forward rangefinder reading at the goal pose (DISTANCE_SENSOR, orientation forward): give "
+            "the target's distance with --distance-m"
+        )
+    goal = GoalRecord(
+        pose, box, depth, source, box_source, config.kind, (frame.width, frame.height), frame.image
+    )
+    log.info(
+        "goal: %s, target box %s (%s), %.2f m (%s)",
+        pose,
+        [round(v, 1) for v in box],
+        box_source,
+        depth,
+        source,
+    )
+    return goal
+
+
+def centre_by_image(
+    vehicle: Vehicle, camera: Camera, model: CameraModel, config: FlownCollectConfig, control: PoseControl
+) -> None:
+    """`--goal scene`: a few small moves that bring the detected target to the image centre, as an
+    operator watching the stream would (the pose geometry turns a pixel offset into metres)."""
+    epsilon = config.epsilon_px or model.width * 10.0 / 224.0
+    for _ in range(CENTRING_MOVES):
+        goal = record_goal(vehicle, camera, model, config)
+        du, dv = goal.offset_px
+        if abs(du) <= 0.3 * epsilon and abs(dv) <= 0.3 * epsilon:
+            return
+        here = goal.pose
+        target = model.point_ned(here, (du, dv), goal.depth_m)
+        centred = model.pose_for_offset(target, (0.0, 0.0), goal.depth_m, here.yaw_deg)
+        log.info("centring the target by the image: offset (%.1f, %.1f) px", du, dv)
+        fly_to(vehicle, centred, control, config.settling)
+    log.warning(
+        "the target is not centred within 0.3 ε after %d moves: the goal is where it is", CENTRING_MOVES
+    )
+
+
+def verify_goal(
+    vehicle: Vehicle, camera: Camera, model: CameraModel, goal: GoalRecord, agree_px: float
+) -> tuple[float, float]:
+    """At the goal pose of an earlier flight: the target must be where the goal image had it. Returns the
+    tracked offset (`GoalError` when it is not found, or too far from the goal image's)."""
+    assert goal.image is not None
+    frame = fresh_frame(camera, time.monotonic())
+    tracker = TemplateTracker(goal.image, goal.box_px)
+    du0, dv0 = goal.offset_px
+    width, height = model.width, model.height
+    found = tracker.track(frame.image, (du0 + width / 2, dv0 + height / 2), 3.0 * agree_px, 1.0)
+    tolerance = 2.0 * agree_px  # the pose estimate may have drifted since: a moved frame is a larger jump
+    if found is None:
+        raise GoalError(
+            "at the goal pose the camera does not see the goal image's target: the vehicle's local frame "
+            "has moved (another takeoff spot, a reset estimator?); record a new goal"
+        )
+    du, dv = found.centre_px[0] - width / 2, found.centre_px[1] - height / 2
+    if math.hypot(du - du0, dv - dv0) > tolerance:
+        raise GoalError(
+            f"at the goal pose the target is at ({du:.1f}, {dv:.1f}) px, the goal image had it at "
+            f"({du0:.1f}, {dv0:.1f}): the vehicle's local frame has moved; record a new goal"
+        )
+    return du, dv
