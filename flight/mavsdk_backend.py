@@ -28,7 +28,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 from mavsdk import ComponentType, Configuration, ConnectionResult, Mavsdk
 from mavsdk.plugins.action import Action, ActionError, ActionResult
@@ -48,6 +48,11 @@ from flight.vehicle import Deadline, Vehicle, wait_for
 
 log = logging.getLogger(__name__)
 
+
+class Closable(Protocol):
+    def close(self) -> None: ...
+
+
 _RETRY_ARM = {ActionResult.COMMAND_DENIED, ActionResult.BUSY, ActionResult.TIMEOUT, ActionResult.FAILED}
 READY_REPORT_EVERY_S = 5.0
 DISARM_RACE_WAIT_S = 3.0
@@ -59,8 +64,10 @@ class MavsdkVehicle(Vehicle):
 
     realtime = True
 
-    def __init__(self, config: MavsdkConfig | None = None) -> None:
+    def __init__(self, config: MavsdkConfig | None = None, link: Closable | None = None) -> None:
+        """`link`: what carries the connection and goes with it (a relay in front of MAVSDK), closed last."""
         self.config = config or MavsdkConfig()
+        self._link = link
         self.setpoints_sent = 0
         self._cache = TelemetryCache(self.config.link_timeout_s)
         self._texts_at_offboard = 0  # the STATUSTEXT count when offboard was confirmed
@@ -397,3 +404,6 @@ class MavsdkVehicle(Vehicle):
         self._action = self._offboard = self._telemetry = self._system = None
         if mavsdk is not None:
             mavsdk.destroy()
+        link, self._link = self._link, None
+        if link is not None:
+            link.close()

@@ -22,6 +22,13 @@ other sender on the vehicle side is dropped and counted (`foreign_datagrams`), s
 neither feed the client telemetry nor receive its commands. On the client side only the client's
 own port (`client_port` on loopback, where MAVSDK listens and sends from) is heard.
 
+With a signing key (`signing_key`: MAVLink 2 message signing, `drone_inspect_core.signing`) the relay
+signs for a client that cannot: MAVSDK 4's C API has no signing, so every message from the client is
+re-packed signed (its sender and sequence kept) before it goes to the vehicle, and only messages the
+vehicle signed with the key, fresh, reach the client; unsigned, wrongly signed or replayed ones are
+dropped and counted (`unsigned_dropped`), the vehicle's identifying heartbeat included. The .tlog
+holds the signed frames, as they crossed the vehicle's link.
+
 Recording never costs the link: a .tlog write that fails (a full disk, a removed folder) stops the
 recording, says so once (`recording_error`), cuts the file back to its last whole message and
 renames it `*.incomplete.tlog`, and the relay goes on relaying. A send that fails is counted and
@@ -47,7 +54,11 @@ from typing import BinaryIO
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from drone_inspect_core.ports import free_port
+from drone_inspect_core.signing import FrameSigner, FrameVerifier, SigningKey
+from flight.errors import ConnectionUrlError
 from flight.link_faults import FaultyDelivery, LinkFaults
+from flight.urls import udpin_address
 
 log = logging.getLogger(__name__)
 
@@ -98,6 +109,7 @@ class MavlinkRelay:
         listen_host: str = "127.0.0.1",
         faults: LinkFaults | None = None,
         vehicle_system_id: int | None = None,
+        signing_key: SigningKey | None = None,
     ) -> None:
         self.listen_port = listen_port
         self.client_port = client_port
@@ -111,6 +123,11 @@ class MavlinkRelay:
         self.foreign_datagrams = 0
         """Datagrams dropped because they came from neither the vehicle nor the client."""
         self.send_errors = 0
+        self.signed = signing_key is not None
+        self.unsigned_dropped = 0
+        """Messages from the vehicle side dropped for a missing, wrong or replayed signature."""
+        self._signer = None if signing_key is None else FrameSigner(signing_key)
+        self._verifier = None if signing_key is None else FrameVerifier(signing_key)
         self.recording_error: str | None = None
         """Why the .tlog stopped early (None while it records, or when it finished whole)."""
         self.faults = FaultyDelivery(faults) if faults is not None and faults.active else None
@@ -183,12 +200,7 @@ class MavlinkRelay:
             data, address = sock.recvfrom(_MAX_DATAGRAM)
         except OSError:  # an ICMP error from an earlier send, or a socket being closed
             return
-        known = self.vehicle_address is not None
-        if (
-            side == "vehicle"
-            and address != self.vehicle_address
-            and (known or not self._identify_vehicle(data, address))
-        ):
+        if side == "vehicle" and self.vehicle_address is not None and address != self.vehicle_address:
             self._stranger(address)
             return
         if side == "client" and address != (self.client_host, self.client_port):
@@ -196,10 +208,44 @@ class MavlinkRelay:
             return
         if side == "client" and self.drop_uplink:
             return
+        if self._signer is not None:
+            data = self._signed(data) if side == "client" else self._verified(data)
+            if not data:
+                return
+        if side == "vehicle" and self.vehicle_address is None and not self._identify_vehicle(data, address):
+            self._stranger(address)
+            return
         if self.faults is not None:
             self.faults.submit(time.monotonic(), (side, data))
         else:
             self._send(side, data)
+
+    def _signed(self, data: bytes) -> bytes:
+        """The client's messages in `data`, each re-packed signed with the key."""
+        assert self._signer is not None
+        out = []
+        for message in parse_datagram(data):
+            try:
+                out.append(self._signer.sign(message))
+            except Exception as exc:  # a message pymavlink cannot pack again: not sent unsigned either
+                log.warning("MAVLink relay: could not sign %s from the client: %r", message.get_type(), exc)
+        return b"".join(out)
+
+    def _verified(self, data: bytes) -> bytes:
+        """The frames of `data` signed with the key and fresh; the others are counted and dropped."""
+        assert self._verifier is not None
+        out = []
+        for message in parse_datagram(data):
+            frame = bytes(message.get_msgbuf())
+            if self._verifier.verify(frame):
+                out.append(frame)
+            else:
+                self.unsigned_dropped += 1
+                if self.unsigned_dropped == 1:
+                    log.warning(
+                        "MAVLink relay: dropping %s: not signed with the link's key", message.get_type()
+                    )
+        return b"".join(out)
 
     def _identify_vehicle(self, data: bytes, address: tuple[str, int]) -> bool:
         """Lock onto `address` if `data` holds the vehicle's heartbeat; True if it did."""
@@ -307,3 +353,30 @@ class MavlinkRelay:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.close()
+
+
+def relay_in_front(
+    url: str,
+    tlog_path: str | Path | None = None,
+    faults: LinkFaults | None = None,
+    signing_key: SigningKey | None = None,
+) -> tuple[MavlinkRelay | None, str]:
+    """A relay taking a `udpin://HOST:PORT` vehicle link, and the loopback URL MAVSDK listens on behind it
+    (a free port); for any other link (None, `url`): flown directly, without a .tlog.
+
+    With `signing_key` the link is signed, which only the relay can do for MAVSDK: a link that cannot
+    be relayed (serial, TCP, udpout) is refused with `ConnectionUrlError` rather than flown unsigned.
+    """
+    address = udpin_address(url)
+    if address is None:
+        if signing_key is not None:
+            raise ConnectionUrlError(
+                url,
+                "MAVLink signing needs a udpin:// link: the relay in front of MAVSDK signs (MAVSDK "
+                "cannot), and only UDP is relayed",
+            )
+        return None, url
+    host, port = address
+    client_port = free_port("udp")
+    relay = MavlinkRelay(port, client_port, tlog_path, host, faults, signing_key=signing_key)
+    return relay, f"udpin://127.0.0.1:{client_port}"

@@ -12,6 +12,7 @@ import logging
 import time
 from dataclasses import dataclass, field
 
+from drone_inspect_core.signing import SigningKey
 from flight.moves import MoveResult, execute_move
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, flight_guard
@@ -120,15 +121,25 @@ def fly_move(
     return MoveFlightResult(move, FlightTimings(*marks), safe.status_texts())
 
 
-def open_vehicle(spec: str, seed: int = 0) -> Vehicle:
-    """`sim` → an in-process `PyBulletVehicle` (seeded); anything else is a MAVSDK connection URL.
+def open_vehicle(spec: str, seed: int = 0, signing_key: SigningKey | None = None) -> Vehicle:
+    """`sim` → an in-process `PyBulletVehicle` (seeded); anything else is a MAVSDK connection URL, behind
+    a relay where it is `udpin://` (which signs the link with `signing_key`: `flight.relay.relay_in_front`).
 
     Imports each backend only when asked, so that a real-vehicle run never loads PyBullet.
     """
     if spec == SIM_VEHICLE:
+        if signing_key is not None:
+            raise ValueError("a signing key is for a MAVLink vehicle, not the in-process simulation")
         from flight.pybullet_backend import PyBulletVehicle
 
         return PyBulletVehicle.create(seed=seed)
     from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
+    from flight.relay import relay_in_front
 
-    return MavsdkVehicle(MavsdkConfig(url=spec))
+    relay, url = relay_in_front(spec, signing_key=signing_key)
+    try:
+        return MavsdkVehicle(MavsdkConfig(url=url, shown_url=spec), link=relay)
+    except BaseException:
+        if relay is not None:
+            relay.close()
+        raise

@@ -3,9 +3,10 @@
 The child runs in its own session, so a Ctrl-C in the terminal reaches only the
 controller (which lands first and then stops the child); it watches its parent and
 stops by itself within a second when the parent dies, however the parent dies. It
-reads its config from a pipe (`--config -`) and prints one line `<prefix>{json}` when it
-is ready; `start()` waits for that line (or for the child's exit, reported with the end
-of its output) and `ready` holds the JSON.
+reads its config from a pipe (`--config -`; `secrets`, such as a run's signing key, are added
+there and nowhere else: the copy of the config kept beside the log leaves them out) and prints
+one line `<prefix>{json}` when it is ready; `start()` waits for that line (or for the child's
+exit, reported with the end of its output) and `ready` holds the JSON.
 
 The child's output comes through a pipe that a reader thread drains all the time and
 copies into `log_path` as a record: a log that cannot be written (a full disk, a removed
@@ -52,8 +53,10 @@ class SimulatorProcess:
         ready_prefix: str,
         start_timeout_s: float = 90.0,
         name: str = "simulator",
+        secrets: dict[str, Any] | None = None,
     ) -> None:
         self.module, self.config, self.log_path = module, config, Path(log_path)
+        self._secrets = dict(secrets or {})
         self.ready_prefix, self.start_timeout_s, self.name = ready_prefix, start_timeout_s, name
         self.config_path = self.log_path.with_suffix(".json")
         self.ready: dict[str, Any] = {}
@@ -83,7 +86,7 @@ class SimulatorProcess:
         try:
             assert self._process.stdin is not None
             with self._process.stdin:
-                self._process.stdin.write(json.dumps(self.config).encode())
+                self._process.stdin.write(json.dumps({**self.config, **self._secrets}).encode())
             self._wait_ready()
         except BaseException:
             self.close()

@@ -26,6 +26,12 @@ do (../shared/MAVLINK_NOTES.md):
 - after a disarm the mode reverts to the last mode the client asked for with
   DO_SET_MODE (NAV_LAND and failsafes do not change it: after OFFBOARD → land the
   vehicle is back in OFFBOARD and the next arm is denied, as on PX4).
+
+The vehicle's own limits (`VehicleLimits`, set by whoever started it) hold whatever a client
+asks: setpoints are flown at most at the limits (and the MPC_* parameters, which cannot exceed
+them; 0 stops), and with a fence the part of a setpoint that would carry the drone past it (a
+cylinder around home, a ceiling) is dropped, re-checked every loop turn; a takeoff above the
+ceiling is denied.
 """
 
 from __future__ import annotations
@@ -39,7 +45,8 @@ from enum import Enum
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from drone_inspect_core.frames import wrap_rad
+from drone_inspect_core.frames import heading_to_world_ned, wrap_rad
+from drone_inspect_core.vehicle_limits import VehicleLimits
 from sim_world.vehicle import px4_modes as modes
 from sim_world.vehicle.model import ModelRefused, VehicleModel
 from sim_world.vehicle.params import ParameterStore
@@ -57,6 +64,7 @@ FAILED = mavlink.MAV_RESULT_FAILED
 _HOLD_LIKE = (modes.AUTO_LOITER, modes.POSCTL, modes.ALTCTL)
 _OBL_ACTIONS = {0: modes.POSCTL, 1: modes.ALTCTL, 4: modes.AUTO_LAND, 5: modes.AUTO_LOITER}
 _YAW_GAIN_PER_S = 2.0  # absolute-yaw setpoints: yaw rate = gain × heading error
+FENCE_LOOKAHEAD_S = 0.5  # outward motion stops this long before it would reach the fence
 
 
 @dataclass(frozen=True)
@@ -88,9 +96,13 @@ class Commander:
         params: ParameterStore,
         config: CommanderConfig | None = None,
         client_clock: Callable[[], float] | None = None,
+        limits: VehicleLimits | None = None,
     ):
         self._model = model
         self._client_clock = client_clock
+        self.limits = limits or VehicleLimits()
+        self.fence_stops = 0
+        """Loop turns in which the fence dropped part of a setpoint."""
         self._params = params
         self.config = config or CommanderConfig()
         self.texts: deque[tuple[int, str]] = deque(maxlen=64)  # (MAV_SEVERITY, text) to send
@@ -221,6 +233,11 @@ class Commander:
         if not math.isfinite(altitude) or altitude < 0.5:
             self.say(mavlink.MAV_SEVERITY_CRITICAL, f"Takeoff denied: altitude {altitude:.2f} m too low")
             return DENIED
+        ceiling = self.limits.fence_max_altitude_m
+        if ceiling is not None and altitude > ceiling:
+            text = f"Takeoff denied: {altitude:.1f} m above the fence's {ceiling:g} m"
+            self.say(mavlink.MAV_SEVERITY_CRITICAL, text)
+            return DENIED
         try:
             self._model.takeoff(altitude)
         except ModelRefused as exc:
@@ -258,8 +275,8 @@ class Commander:
             sp = self._setpoint
             if sp is None or self.setpoint_age_s() > self._params.get("COM_OF_LOSS_T"):
                 self._trigger_failsafe(now)
-            elif sp.yaw_deg is not None:
-                self._apply_setpoint()
+            elif sp.yaw_deg is not None or self._fenced:
+                self._apply_setpoint()  # a heading to turn to, or a fence to keep: re-checked every turn
         hold_s = self._params.get("COM_FAIL_ACT_T")
         if self.failsafe is FailsafeStage.HOLD and now - self._failsafe_since_s >= hold_s:
             self.failsafe = FailsafeStage.ACTION
@@ -319,29 +336,62 @@ class Commander:
                 raise
             log.debug("%s on the ground: %s", mode.name, exc)
 
+    @property
+    def _fenced(self) -> bool:
+        return self.limits.fence_radius_m is not None or self.limits.fence_max_altitude_m is not None
+
     def _apply_setpoint(self) -> None:
         if self._setpoint is None:
             return
-        p = self._params
+        p, lim = self._params, self.limits
+        yaw_limit = min(p.get("MPC_YAWRAUTO_MAX"), lim.max_yaw_rate_deg_s)
         sp = self._setpoint.limited(
-            p.get("MPC_XY_VEL_MAX"),
-            p.get("MPC_Z_VEL_MAX_UP"),
-            p.get("MPC_Z_VEL_MAX_DN"),
-            p.get("MPC_YAWRAUTO_MAX"),
+            min(p.get("MPC_XY_VEL_MAX"), lim.max_horizontal_speed_m_s),
+            min(p.get("MPC_Z_VEL_MAX_UP"), lim.max_up_m_s),
+            min(p.get("MPC_Z_VEL_MAX_DN"), lim.max_down_m_s),
+            yaw_limit,
         )
+        kinematics = self._model.kinematics()
         yawspeed = sp.yawspeed_deg_s
         if sp.yaw_deg is not None:
-            error_rad = wrap_rad(math.radians(sp.yaw_deg) - self._model.kinematics().yaw_rad)
-            limit = p.get("MPC_YAWRAUTO_MAX")
-            yawspeed = min(max(math.degrees(_YAW_GAIN_PER_S * error_rad), -limit), limit)
+            error_rad = wrap_rad(math.radians(sp.yaw_deg) - kinematics.yaw_rad)
+            yawspeed = min(max(math.degrees(_YAW_GAIN_PER_S * error_rad), -yaw_limit), yaw_limit)
         a, b, down = sp.velocity_m_s
+        body = sp.frame is SetpointFrame.BODY_NED
         try:
-            if sp.frame is SetpointFrame.BODY_NED:
+            fenced = self._fence(*(heading_to_world_ned(a, b, kinematics.yaw_rad) if body else (a, b)), down)
+            if fenced is not None:
+                self._model.set_velocity_ned(*fenced, yawspeed)
+            elif body:
                 self._model.set_velocity_body(a, b, down, yawspeed)
             else:
                 self._model.set_velocity_ned(a, b, down, yawspeed)
         except ModelRefused as exc:
             log.warning("setpoint not flown: %s", exc)
+
+    def _fence(self, north: float, east: float, down: float) -> tuple[float, float, float] | None:
+        """The NED velocity without what would carry the drone past the fence within the lookahead;
+        None when nothing had to be dropped (or there is no fence)."""
+        radius, ceiling = self.limits.fence_radius_m, self.limits.fence_max_altitude_m
+        if radius is None and ceiling is None:
+            return None
+        position = self._model.kinematics().position_ned_m
+        n, e, d = (float(v) for v in position)
+        stopped = False
+        r = math.hypot(n, e)
+        outward = (north * n + east * e) / r if r > 1e-6 else 0.0
+        if radius is not None and outward > 0.0 and r + outward * FENCE_LOOKAHEAD_S >= radius:
+            north, east = north - outward * n / r, east - outward * e / r
+            stopped = True
+        if ceiling is not None and down < 0.0 and -d - down * FENCE_LOOKAHEAD_S >= ceiling:
+            down = 0.0
+            stopped = True
+        if not stopped:
+            return None
+        if self.fence_stops == 0:
+            self.say(mavlink.MAV_SEVERITY_WARNING, "Geofence: motion towards the fence stopped")
+        self.fence_stops += 1
+        return north, east, down
 
     def _trigger_failsafe(self, now: float) -> None:
         self.failsafe = FailsafeStage.HOLD

@@ -17,6 +17,8 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any, TextIO
 
+from drone_inspect_core.signing import SigningKey
+from drone_inspect_core.vehicle_limits import VehicleLimits
 from sim_world.physics.wind import WindConfig
 from sim_world.process_entry import say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
@@ -109,10 +111,11 @@ def run_sim_vehicle(
     run: SimVehicleRun,
     stop: threading.Event | None = None,
     on_ready: Callable[[SimVehicle], None] | None = None,
+    on_end: Callable[[SimVehicle], None] | None = None,
 ) -> LoopStats:
     """Serve the world until `stop` is set or `duration_s` passes; returns the loop statistics.
 
-    `on_ready(vehicle)` (a callable) is called once the ports are open.
+    `on_ready(vehicle)` is called once the ports are open, `on_end(vehicle)` before it closes.
     """
     stop = stop or threading.Event()
     world, vehicle_config = build_world(run)
@@ -156,11 +159,29 @@ def run_sim_vehicle(
                         s.mean_render_ms, s.messages_in, s.messages_out,
                     )  # fmt: skip
             stats = vehicle.stats()
+            if on_end is not None:
+                on_end(vehicle)
     return stats
 
 
 # --------------------------------------------------------------------------- serving a process
 READY_PREFIX = "sim-vehicle ready: "
+SUMMARY_PREFIX = "sim-vehicle link: "
+"""The last line of a served vehicle: who its link accepted messages from and what it dropped."""
+
+
+def link_summary(vehicle: SimVehicle) -> dict[str, Any]:
+    """What the vehicle's link let through and kept out, and the parameters changed since boot."""
+    stats = vehicle.stats()
+    return {
+        "signed": vehicle.config.signing_key is not None,
+        "accepted": stats.messages_in,
+        "accepted_from": vehicle.senders(),
+        "dropped_unsigned": stats.messages_unsigned,
+        "dropped_foreign": stats.messages_foreign,
+        "dropped_bad": stats.messages_bad,
+        "params_changed": vehicle.params.changed(),
+    }
 
 
 def serve(
@@ -187,8 +208,11 @@ def serve(
         )
         say_ready(out, READY_PREFIX, info)
 
+    def end(vehicle: SimVehicle) -> None:
+        say_ready(out, SUMMARY_PREFIX, link_summary(vehicle))
+
     try:
-        stats = run_sim_vehicle(run, stop, on_ready=ready)
+        stats = run_sim_vehicle(run, stop, on_ready=ready, on_end=end)
     except (OSError, SimVehicleError, VideoError) as exc:
         out.write(f"sim-vehicle failed: {exc}\n")
         out.flush()
@@ -202,7 +226,10 @@ def serve(
 
 
 def run_to_json(run: SimVehicleRun) -> dict[str, Any]:
-    """The run as JSON for the process entry point (`python -m sim_world.vehicle --config FILE`)."""
+    """The run as JSON for the process entry point (`python -m sim_world.vehicle --config FILE`).
+
+    The signing key is left out (this JSON is also kept beside the run's report): it travels apart,
+    through the child's stdin only (`secret_json`)."""
     v = run.vehicle
     return {
         "vehicle": {
@@ -211,7 +238,7 @@ def run_to_json(run: SimVehicleRun) -> dict[str, Any]:
             "adopt_client": v.adopt_client, "speed": v.speed,
             "arming_boot_delay_s": v.commander.arming_boot_delay_s, "params": dict(v.params),
             "video": v.video, "video_port": v.video_port, "video_host": v.video_host,
-            "video_fps": v.video_fps,
+            "video_fps": v.video_fps, "limits": asdict(v.limits),
         },
         "scene": run.scene.model_dump(mode="json"),
         "seed": run.seed,
@@ -225,10 +252,20 @@ def run_to_json(run: SimVehicleRun) -> dict[str, Any]:
     }  # fmt: skip
 
 
+def secret_json(run: SimVehicleRun) -> dict[str, Any]:
+    """What `run_to_json` leaves out, for the child's stdin only: the signing key (hex), if any."""
+    key = run.vehicle.signing_key
+    return {} if key is None else {"signing_key": key.hex()}
+
+
 def run_from_json(data: dict[str, Any]) -> SimVehicleRun:
-    """The inverse of `run_to_json` (validated by the dataclasses and the scene model)."""
+    """The inverse of `run_to_json` merged with `secret_json` (validated by the dataclasses and the scene
+    model)."""
     v = dict(data["vehicle"])
     commander = CommanderConfig(arming_boot_delay_s=float(v.pop("arming_boot_delay_s")))
+    v["limits"] = VehicleLimits(**v.get("limits", {}))
+    if data.get("signing_key") is not None:
+        v["signing_key"] = SigningKey.from_text(str(data["signing_key"]))
     wind = {k: tuple(x) if isinstance(x, list) else x for k, x in data["wind"].items()}
     return SimVehicleRun(
         vehicle=SimVehicleConfig(commander=commander, **v),

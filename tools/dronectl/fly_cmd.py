@@ -11,7 +11,8 @@ Real PX4 firmware (SITL) flying the simulated world: `--vehicle px4-sitl --px4 D
 (DIR: a PX4 SITL build folder, default $PX4_SITL_DIR).
 
 A real vehicle: a mission file with `vehicle: udpin://0.0.0.0:14540` and
-`camera: http://<drone>:8080/stream.mjpg` (or the same as --vehicle/--camera).
+`camera: http://<drone>:8080/stream.mjpg` (or the same as --vehicle/--camera); one set up with
+MAVLink 2 signing: `--signing-key FILE` (32 bytes as 64 hex digits or base64).
 Exit status 0 when the mission's expectations hold, 1 when they do not, 2 on a
 bad mission file or option.
 """
@@ -35,6 +36,7 @@ from controller.missions.schema import (
     load_mission,
 )
 from drone_inspect_core.files import OutputDirError
+from dronectl.options import add_signing_key, signing_key
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[2] / "missions" / "default.yaml"
 
@@ -138,6 +140,7 @@ def main(argv: list[str]) -> int:
         metavar="FILE.rrd",
         help="also record the flight for the Rerun viewer (a new file; needs the [rerun] extra)",
     )
+    add_signing_key(parser)
     parser.add_argument("-v", "--verbose", action="store_true", help="log every module's progress")
     args = parser.parse_args(argv)
     if not args.verbose:
@@ -148,6 +151,12 @@ def main(argv: list[str]) -> int:
         if args.seed is not None:
             mission = mission.with_seed(args.seed)
         mission = _px4_options(mission, args)
+        key = signing_key(args)
+        if key is not None and not mission.is_real:
+            raise ValueError(
+                f"--signing-key is for a real vehicle set up with that key; {mission.vehicle} gets a key "
+                "of its own per run (sim-mavlink) or cannot sign (px4-sitl, sim)"
+            )
     except (MissionFileError, ValueError) as exc:
         print(f"dronectl fly: {exc}", file=sys.stderr)
         return 2
@@ -170,7 +179,7 @@ def main(argv: list[str]) -> int:
         return 2
     print(f"flying {mission.name} ({mission.vehicle}, planner {mission.planner}) ...", flush=True)
     try:
-        result = run_mission(mission, out, rerun_path=args.rerun, claimed=True)
+        result = run_mission(mission, out, rerun_path=args.rerun, claimed=True, signing_key=key)
     except Exception as exc:  # could not start: a clear line, not a traceback
         print(f"dronectl fly: {mission.name} could not start: {type(exc).__name__}: {exc}", file=sys.stderr)
         print(f"      report: {out / 'report.json'} (why it did not start)", file=sys.stderr)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from dronectl.options import add_signing_key, signing_key
 from flight.errors import FlightError
 from flight.safety import SafetyLimits
 from flight.scenario import SIM_VEHICLE, MoveFlight, fly_move, open_vehicle
@@ -37,6 +38,7 @@ def main(argv: list[str]) -> int:
     )
     parser.add_argument("--max-speed", type=float, default=1.0, help="safety limit on horizontal speed, m/s")
     parser.add_argument("--seed", type=int, default=0, help="world seed for --vehicle sim")
+    add_signing_key(parser)
     args = parser.parse_args(argv)
     if args.right_m == 0.0 and args.forward_m == 0.0 and args.down_m == 0.0:
         parser.error(
@@ -51,11 +53,12 @@ def main(argv: list[str]) -> int:
             takeoff_alt_m=args.takeoff_alt,
         )
         limits = SafetyLimits(max_horizontal_speed_m_s=args.max_speed)
+        key = signing_key(args)
     except ValueError as exc:
         parser.error(str(exc))
     print(f"connecting to {args.vehicle} ...")
     try:
-        with open_vehicle(args.vehicle, seed=args.seed) as vehicle:
+        with open_vehicle(args.vehicle, seed=args.seed, signing_key=key) as vehicle:
             result = fly_move(vehicle, flight, limits)
     except FlightError as exc:
         print(f"dronectl move: {exc}", file=sys.stderr)

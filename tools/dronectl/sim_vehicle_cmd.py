@@ -10,6 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.sim_speed import SimSpeed, parse_sim_speed
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
 from sim_world.vehicle.commander import CommanderConfig
@@ -39,6 +40,12 @@ def _parser() -> argparse.ArgumentParser:
     net.add_argument("--video-port", type=int, help="MJPEG HTTP port (default 8080+N)")
     net.add_argument("--video-fps", type=float, default=15.0, help="camera frames per second (default 15)")
     net.add_argument("--no-video", action="store_true", help="serve no camera (saves the rendering CPU)")
+    net.add_argument(
+        "--signing-key",
+        metavar="FILE",
+        help="MAVLink 2 signing: sign everything and obey only messages signed with this key (32 bytes, "
+        "64 hex digits or base64 on one line); fly it with `--signing-key FILE` too",
+    )
     sim = ap.add_argument_group("simulation")
     sim.add_argument(
         "--speed",
@@ -85,6 +92,7 @@ def main(argv: list[str]) -> int:
             video_port=args.video_port,
             video_host=args.bind,
             video_fps=args.video_fps,
+            signing_key=None if args.signing_key is None else SigningKey.load(args.signing_key),
         )
         run = SimVehicleRun(
             vehicle=vehicle,

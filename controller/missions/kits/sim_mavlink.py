@@ -8,12 +8,18 @@ forwards to MAVSDK. Ports (`mission.ports`): "auto" (the default) takes free one
 (the relay and the sim bind port 0 and say which they got; MAVSDK gets a port the kernel picks),
 so any number of missions fly at once; fixed ones (the sim binds UDP `p`, the relay `p+1`, MAVSDK
 `p+2`, video HTTP `ports.http`) are checked free before anything starts, naming the one taken.
+
+The link is signed (MAVLink 2 signing) with a key made for the run: the sim-vehicle obeys nothing
+unsigned, and the relay signs for MAVSDK (which cannot) and passes on only what the vehicle signed.
+The key reaches the sim-vehicle through its stdin, never a file. The vehicle holds its own limits,
+a little wider than the controller's (`vehicle_limits_for`), whatever a client asks.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
+from dataclasses import asdict
 from pathlib import Path
 
 from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, link_faults_for
@@ -27,20 +33,44 @@ from controller.missions.kits.simulated import (
 from controller.missions.schema import Mission, StartOffset
 from controller.missions.setup import start_offset_for
 from drone_inspect_core.ports import check_free, free_port
+from drone_inspect_core.signing import SigningKey
+from drone_inspect_core.vehicle_limits import VehicleLimits
 from flight.mavsdk_backend import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
+from flight.safety import SafetyLimits
 from flight.sim_launcher import SimulatorProcess
 from perception.stream_camera import StreamCamera
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.serve import READY_PREFIX as SIM_READY_PREFIX
-from sim_world.vehicle.serve import SimVehicleRun, run_to_json
+from sim_world.vehicle.serve import SimVehicleRun, run_to_json, secret_json
 
 READY_TIMEOUT_S = 60.0
 
 
-def sim_vehicle_run(mission: Mission, start: StartOffset, system_id: int, relay_port: int) -> SimVehicleRun:
+def vehicle_limits_for(limits: SafetyLimits | None) -> VehicleLimits:
+    """What a vehicle we start holds by itself: a little wider than the controller's own limits, so
+    it never cuts short what the controller may do and stops what it may not."""
+    limits = limits or SafetyLimits()
+    fence = limits.geofence
+    return VehicleLimits.around(
+        limits.max_horizontal_speed_m_s,
+        limits.max_vertical_speed_m_s,
+        limits.max_yaw_rate_deg_s,
+        None if fence is None else (fence.half_width_north_m, fence.half_width_east_m),
+        None if fence is None else fence.max_up_m,
+    )
+
+
+def sim_vehicle_run(
+    mission: Mission,
+    start: StartOffset,
+    system_id: int,
+    relay_port: int,
+    signing_key: SigningKey | None = None,
+    limits: VehicleLimits | None = None,
+) -> SimVehicleRun:
     """The sim-vehicle for a mission: `mission.sim_speed`, PX4's boot rules, landed below the start pose,
-    streaming to the relay on `relay_port`."""
+    streaming to the relay on `relay_port`, signing with `signing_key`, holding `limits`."""
     ports = mission.ports
     vehicle = SimVehicleConfig(
         speed=mission.sim_speed,
@@ -50,6 +80,8 @@ def sim_vehicle_run(mission: Mission, start: StartOffset, system_id: int, relay_
         adopt_client=False,  # telemetry to the relay (the controller) only
         video_port=0 if ports.http == "auto" else ports.http,
         video_fps=15.0,
+        signing_key=signing_key,
+        limits=limits or VehicleLimits(),
     )
     return SimVehicleRun(
         vehicle=vehicle,
@@ -60,12 +92,14 @@ def sim_vehicle_run(mission: Mission, start: StartOffset, system_id: int, relay_
 
 @contextmanager
 def open_sim_mavlink_kit(
-    mission: Mission, out_dir: Path, models: LoadedModels | None = None
+    mission: Mission, out_dir: Path, models: LoadedModels | None = None, limits: SafetyLimits | None = None
 ) -> Iterator[FlightKit]:
-    """sim-vehicle subprocess + tlog relay + MAVSDK + MJPEG stream camera + detector + planner."""
+    """sim-vehicle subprocess + tlog relay + MAVSDK + MJPEG stream camera + detector + planner;
+    `limits`: the controller's, which the vehicle's own are made from."""
     start = start_offset_for(mission, SIM_HFOV_DEG, SIM_HFOV_DEG)  # square image
     out_dir.mkdir(parents=True, exist_ok=True)
     system_id = new_system_id()
+    key = SigningKey.generate()  # this run's link, and no other
     p, http = mission.ports.mavlink_udp, mission.ports.http
     if p == "auto":
         relay_port, mavsdk_port = 0, free_port("udp")
@@ -83,13 +117,15 @@ def open_sim_mavlink_kit(
                 out_dir / TLOG_NAME,
                 faults=link_faults_for(mission),
                 vehicle_system_id=system_id,
+                signing_key=key,
             )
         )
-        run = sim_vehicle_run(mission, start, system_id, tlog.listen_address[1])
+        vehicle_limits = vehicle_limits_for(limits)
+        run = sim_vehicle_run(mission, start, system_id, tlog.listen_address[1], key, vehicle_limits)
         sim = stack.enter_context(
             SimulatorProcess(
                 "sim_world.vehicle", run_to_json(run), out_dir / "sim_vehicle.log", SIM_READY_PREFIX,
-                start_timeout_s=READY_TIMEOUT_S, name="sim-vehicle",
+                start_timeout_s=READY_TIMEOUT_S, name="sim-vehicle", secrets=secret_json(run),
             )
         )  # fmt: skip
         truth = SimTruth(sim.ready["truth_url"])
@@ -115,6 +151,8 @@ def open_sim_mavlink_kit(
                 },
                 "tlog": "recorded by flight.relay between sim-vehicle and MAVSDK",
                 "system_id": system_id,
+                "mavlink_signing": "a key made for this run (the relay signs for MAVSDK)",
+                "vehicle_limits": asdict(vehicle_limits),
                 "sim_speed": mission.sim_speed,
                 "simulator_pid": sim.pid,
             },
