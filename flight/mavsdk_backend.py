@@ -359,6 +359,17 @@ class MavsdkVehicle(Vehicle):
             raise CommandDeniedError("land()", exc.result.name, self._last_text()) from None
         self._wait(lambda t: not t.in_air, timeout_s or self.config.timeouts.land_s, "land()", "landed state")
 
+    def send_land(self) -> bool:
+        """NAV_LAND once through MAVSDK (which resends it 4 times over ~2 s): True on an ack."""
+        if self._action is None:
+            return False
+        try:
+            self._action.land()
+        except ActionError as exc:
+            log.error("last LAND: %s (%s)", exc.result.name, self._last_text() or "no answer")
+            return False
+        return True
+
     def disarm(self, timeout_s: float | None = None) -> None:
         action = self._require(self._action, "disarm()")
         if not self.telemetry().armed:

@@ -13,7 +13,8 @@ the vehicle's address), it can:
   duplication and reordering, both ways;
 - **meter** what reaches the vehicle (`message_times_s`: setpoints per second as the
   vehicle sees them) and **cut** the uplink (`drop_uplink`: the controller's stream
-  stops, telemetry still flows): the flight benchmark and the backend tests use these.
+  stops, telemetry still flows) or the downlink (`drop_downlink`: telemetry stops, commands
+  still reach the vehicle): the flight benchmark and the backend tests use these.
 
 The relay knows its vehicle: it locks onto the address of the first datagram that holds an
 autopilot's HEARTBEAT (CRC-checked; of `vehicle_system_id` when the run knows the id, as it does
@@ -116,6 +117,7 @@ class MavlinkRelay:
         self.path = None if tlog_path is None else Path(tlog_path)
         self.client_host = "127.0.0.1"  # the client (MAVSDK) runs on this machine
         self.drop_uplink = False
+        self.drop_downlink = False
         self.uplink_counts: Counter[int] = Counter()
         self.messages_logged = 0
         self.vehicle_system_id = vehicle_system_id
@@ -206,7 +208,7 @@ class MavlinkRelay:
         if side == "client" and address != (self.client_host, self.client_port):
             self._stranger(address)
             return
-        if side == "client" and self.drop_uplink:
+        if (side == "client" and self.drop_uplink) or (side == "vehicle" and self.drop_downlink):
             return
         if self._signer is not None:
             data = self._signed(data) if side == "client" else self._verified(data)
