@@ -13,10 +13,10 @@ import socket
 import time
 
 import pytest
-from mavlink_fuzz import hostile_commands, hostile_messages, random_datagrams
 from pymavlink.dialects.v20 import common as M
 from sim_vehicle_client import served_vehicle
 
+from controller.benchmarks.hostile_mavlink import hostile_commands, hostile_messages, random_datagrams
 from flight.relay import MavlinkRelay
 from flight.urls import udpin_address
 

@@ -300,7 +300,7 @@ def open_kit(
         elif mission.vehicle == PX4_SITL:
             from controller.missions.kits.px4_sitl import open_px4_sitl_kit
 
-            yield stack.enter_context(open_px4_sitl_kit(mission, out_dir, models))
+            yield stack.enter_context(open_px4_sitl_kit(mission, out_dir, models, limits))
         else:
             from controller.missions.kits.real import open_real_kit
 

@@ -29,6 +29,7 @@ from controller.missions.kits.simulated import (
     new_system_id,
     simulated_mavlink_kit,
     simulated_world_fields,
+    vehicle_limits_for,
 )
 from controller.missions.schema import Mission, StartOffset
 from controller.missions.setup import start_offset_for
@@ -45,20 +46,6 @@ from sim_world.vehicle.serve import READY_PREFIX as SIM_READY_PREFIX
 from sim_world.vehicle.serve import SimVehicleRun, run_to_json, secret_json
 
 READY_TIMEOUT_S = 60.0
-
-
-def vehicle_limits_for(limits: SafetyLimits | None) -> VehicleLimits:
-    """What a vehicle we start holds by itself: a little wider than the controller's own limits, so
-    it never cuts short what the controller may do and stops what it may not."""
-    limits = limits or SafetyLimits()
-    fence = limits.geofence
-    return VehicleLimits.around(
-        limits.max_horizontal_speed_m_s,
-        limits.max_vertical_speed_m_s,
-        limits.max_yaw_rate_deg_s,
-        None if fence is None else (fence.half_width_north_m, fence.half_width_east_m),
-        None if fence is None else fence.max_up_m,
-    )
 
 
 def sim_vehicle_run(

@@ -24,7 +24,9 @@ from controller.missions.kits.base import (
 from controller.missions.schema import Mission, StartOffset
 from controller.missions.setup import scene_config_for, wind_config_for
 from drone_inspect_core.targets import colour_name
+from drone_inspect_core.vehicle_limits import VehicleLimits
 from flight.mavsdk_backend import MavsdkVehicle
+from flight.safety import SafetyLimits
 from perception.stream_camera import StreamCamera
 from sim_world.rendering.camera import CameraConfig
 from sim_world.rendering.video import VideoFaults
@@ -153,4 +155,18 @@ def simulated_mavlink_kit(
         },
         tlog=tlog,
         image_width_px=SIM_IMAGE_PX,
+    )
+
+
+def vehicle_limits_for(limits: SafetyLimits | None) -> VehicleLimits:
+    """What a vehicle we start holds by itself: a little wider than the controller's own limits, so
+    it never cuts short what the controller may do and stops what it may not."""
+    limits = limits or SafetyLimits()
+    fence = limits.geofence
+    return VehicleLimits.around(
+        limits.max_horizontal_speed_m_s,
+        limits.max_vertical_speed_m_s,
+        limits.max_yaw_rate_deg_s,
+        None if fence is None else (fence.half_width_north_m, fence.half_width_east_m),
+        None if fence is None else fence.max_up_m,
     )
