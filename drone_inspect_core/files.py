@@ -9,6 +9,9 @@
   two runs started at once on one folder exactly one gets it; the other is told who holds it.
   `release_claim(path)` removes the marker once the run has written its first file there.
   A folder that cannot be written (read-only, no space) is refused here, before anything starts.
+- `claimed_dir(path, what)`: the same claim for a block of work: a failure that leaves the folder
+  holding nothing gives it back as it was (an empty folder that existed stays; one made here goes),
+  so a command that fails leaves no empty folder behind; on success the claim is released.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +36,7 @@ def write_atomic(path: str | Path, data: bytes | str) -> None:
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     payload = data.encode("utf-8") if isinstance(data, str) else data
+    path.parent.mkdir(parents=True, exist_ok=True)
     try:
         with tmp.open("wb") as file:
             file.write(payload)
@@ -88,6 +93,27 @@ def claim_dir(path: str | Path, what: str = "output folder") -> Path:
             "give a new or empty folder"
         )
     return path
+
+
+@contextlib.contextmanager
+def claimed_dir(path: str | Path, what: str = "output folder") -> Iterator[Path]:
+    """`claim_dir` for the block; on a failure inside it, a folder that still holds nothing but the
+    claim is given back as it was: the folders the claim made are removed, an empty one that existed
+    stays. On success the claim is released."""
+    path = Path(path)
+    made = [folder for folder in (path, *path.parents) if not folder.exists()]  # innermost first
+    claimed = claim_dir(path, what)
+    try:
+        yield claimed
+    except BaseException:
+        release_claim(claimed)
+        for folder in made:
+            try:
+                folder.rmdir()  # only ever an empty one
+            except OSError:
+                break
+        raise
+    release_claim(claimed)
 
 
 def release_claim(path: str | Path) -> None:

@@ -49,6 +49,10 @@ class VehicleLimits:
         if self.fence_max_altitude_m is not None:
             _check(self, "fence_max_altitude_m", 1.0, 10_000.0)
 
+    @property
+    def has_fence(self) -> bool:
+        return self.fence_radius_m is not None or self.fence_max_altitude_m is not None
+
     @classmethod
     def around(
         cls,

@@ -9,6 +9,7 @@ what makes the PyBullet and MAVSDK results comparable.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -20,6 +21,9 @@ from flight.types import VelocityBody
 from flight.vehicle import Vehicle
 
 log = logging.getLogger(__name__)
+
+MAX_MOVE_M = 5.0
+"""The longest move along an axis: the default geofence's half-width (a longer one cannot be flown)."""
 
 SIM_VEHICLE = "sim"
 """`--vehicle sim`: the in-process PyBullet backend (no MAVLink)."""
@@ -38,6 +42,12 @@ class MoveFlight:
     settle_timeout_s: float = 5.0
 
     def __post_init__(self) -> None:
+        for name in ("right_m", "forward_m", "down_m"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and abs(value) <= MAX_MOVE_M):
+                raise ValueError(
+                    f"MoveFlight.{name} must be a distance within ±{MAX_MOVE_M:g} m, got {value}"
+                )
         if not self.speed_m_s > 0:
             raise ValueError(f"MoveFlight.speed_m_s must be > 0, got {self.speed_m_s}")
         if not self.takeoff_alt_m > 0:

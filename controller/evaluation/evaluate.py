@@ -156,11 +156,17 @@ def pair_described(
     return [describe(named_target_name(refs, False), templates, corpus, rng) for refs in targets]
 
 
-def pair_kind_phrases(kinds: Sequence[str], phrases: dict[str, list[str]], seed: int) -> list[str]:
-    """One phrase per image from a `kind: phrase` file, written for its named target's kind (seeded)."""
+def pair_kind_phrases(
+    kinds: Sequence[str], phrases: dict[str, list[str]], seed: int, source: str = "the instruction file"
+) -> list[str]:
+    """One phrase per image from a `kind: phrase` file (`source`), written for its named target's kind
+    (seeded)."""
     missing = sorted(set(kinds) - set(phrases))
     if missing:
-        raise InstructionError(f"the instruction file has no phrase for {missing}")
+        raise InstructionError(
+            f"{source} has no phrase for {', '.join(missing)}, a kind the dataset's images name: add a "
+            f"`{missing[0]}: <phrase>` line"
+        )
     rng = np.random.default_rng(seed)
     return [fill(phrases[k][int(rng.integers(len(phrases[k])))], k) for k in kinds]
 
@@ -173,7 +179,9 @@ def instructions_for(ckpt: LoadedCheckpoint, data: ImageSet, setting: str, seed:
     train_meta = ckpt.meta.get("train", {})
     trained_with = str(train_meta.get("instructions", "varied"))
     if setting not in ("train", "heldout") and is_kind_phrase_file(Path(setting)):
-        return pair_kind_phrases(data.kinds, read_kind_phrases(Path(setting)), seed)
+        return pair_kind_phrases(
+            data.kinds, read_kind_phrases(Path(setting)), seed, f"instruction file {setting}"
+        )
     templates = instruction_templates(setting, trained_with)
     if train_meta.get("target_choice", "named") == "described" and data.targets:
         corpus = "heldout" if setting == "heldout" else ("fixed" if trained_with == "fixed" else "train")

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import ctypes
 import logging
+import math
 import os
 import shutil
 import signal
@@ -138,6 +139,16 @@ def _set_parent_death_signal() -> None:
         pass
 
 
+def check_px4_params(params: Mapping[str, float]) -> None:
+    """ValueError naming the first parameter that is not a PX4 name (upper case, digits, `_`, at most 16
+    characters: what `param set` takes) or whose value is not a finite number."""
+    for name, value in params.items():
+        if not name.replace("_", "").isalnum() or not name.isupper() or len(name) > 16:
+            raise ValueError(f"PX4 parameter name {name!r} is not valid (upper case, at most 16 characters)")
+        if not math.isfinite(float(value)):
+            raise ValueError(f"PX4 parameter {name}: {value!r} is not a finite number")
+
+
 @dataclass(frozen=True)
 class Px4Ports:
     """PX4's ports when a run chooses them (free per run) instead of PX4's per-instance convention."""
@@ -173,10 +184,7 @@ class Px4Options:
             raise ValueError(f"PX4 instance must be 0..{MAX_INSTANCE}, got {self.instance}")
         if self.system_id is not None and not 1 <= self.system_id <= 254:
             raise ValueError(f"system_id must be 1..254, got {self.system_id}")
-        for name, value in self.params.items():
-            if not name.replace("_", "").isalnum() or not name.isupper() or len(name) > 16:
-                raise ValueError(f"PX4 parameter name {name!r} is not valid")
-            float(value)
+        check_px4_params(self.params)
 
 
 class Px4Process:

@@ -30,7 +30,14 @@ from sim_world.px4_bridge.link import (
     SimulatorLinkError,
     SimulatorServer,
 )
-from sim_world.px4_bridge.px4_process import MAX_INSTANCE, Px4Options, Px4Ports, Px4Process, Px4StartError
+from sim_world.px4_bridge.px4_process import (
+    MAX_INSTANCE,
+    Px4Options,
+    Px4Ports,
+    Px4Process,
+    Px4StartError,
+    check_px4_params,
+)
 from sim_world.px4_bridge.sensors import SensorNoise, SensorSuite
 from sim_world.rendering.camera import CameraConfig
 from sim_world.rendering.video import VideoConfig, VideoError, VideoFaults, WorldVideoFeed
@@ -84,6 +91,11 @@ class Px4SimConfig:
     def __post_init__(self) -> None:
         if not 0 <= self.instance <= MAX_INSTANCE:
             raise ValueError(f"PX4 instance must be 0..{MAX_INSTANCE}, got {self.instance}")
+        check_px4_params(self.params)
+        for name in ("video_port", "mavlink_remote_port"):
+            port = getattr(self, name)
+            if port is not None and not 0 <= port <= 65535:
+                raise ValueError(f"{name} must be a port (0..65535), got {port}")
         if not 32 <= self.image_size_px <= 1024:
             raise ValueError(f"image_size_px must be in [32, 1024], got {self.image_size_px}")
         if self.system_id is not None and not 1 <= self.system_id <= 254:

@@ -27,11 +27,8 @@ do (../shared/MAVLINK_NOTES.md):
   DO_SET_MODE (NAV_LAND and failsafes do not change it: after OFFBOARD → land the
   vehicle is back in OFFBOARD and the next arm is denied, as on PX4).
 
-The vehicle's own limits (`VehicleLimits`, set by whoever started it) hold whatever a client
-asks: setpoints are flown at most at the limits (and the MPC_* parameters, which cannot exceed
-them; 0 stops), and with a fence the part of a setpoint that would carry the drone past it (a
-cylinder around home, a ceiling) is dropped, re-checked every loop turn; a takeoff above the
-ceiling is denied.
+The vehicle's own limits (speeds, a fence: `sim_world.vehicle.limits`) hold whatever a client
+asks; a takeoff above the fence's ceiling is denied.
 """
 
 from __future__ import annotations
@@ -48,6 +45,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from drone_inspect_core.frames import heading_to_world_ned, wrap_rad
 from drone_inspect_core.vehicle_limits import VehicleLimits
 from sim_world.vehicle import px4_modes as modes
+from sim_world.vehicle.limits import fenced_velocity, speed_limits
 from sim_world.vehicle.model import ModelRefused, VehicleModel
 from sim_world.vehicle.params import ParameterStore
 from sim_world.vehicle.px4_modes import Px4MainMode, Px4Mode
@@ -64,7 +62,6 @@ FAILED = mavlink.MAV_RESULT_FAILED
 _HOLD_LIKE = (modes.AUTO_LOITER, modes.POSCTL, modes.ALTCTL)
 _OBL_ACTIONS = {0: modes.POSCTL, 1: modes.ALTCTL, 4: modes.AUTO_LAND, 5: modes.AUTO_LOITER}
 _YAW_GAIN_PER_S = 2.0  # absolute-yaw setpoints: yaw rate = gain × heading error
-FENCE_LOOKAHEAD_S = 0.5  # outward motion stops this long before it would reach the fence
 
 
 @dataclass(frozen=True)
@@ -77,8 +74,9 @@ class CommanderConfig:
     initial_mode: Px4Mode = modes.AUTO_LOITER
 
     def __post_init__(self) -> None:
-        if self.arming_boot_delay_s < 0 or self.offboard_stream_max_age_s <= 0:
-            raise ValueError(f"CommanderConfig: delays must be positive: {self}")
+        delay, age = self.arming_boot_delay_s, self.offboard_stream_max_age_s
+        if not (delay >= 0 and age > 0):
+            raise ValueError(f"CommanderConfig: arming delay must be >= 0 ({delay}), stream age > 0 ({age})")
 
 
 class FailsafeStage(Enum):
@@ -275,7 +273,7 @@ class Commander:
             sp = self._setpoint
             if sp is None or self.setpoint_age_s() > self._params.get("COM_OF_LOSS_T"):
                 self._trigger_failsafe(now)
-            elif sp.yaw_deg is not None or self._fenced:
+            elif sp.yaw_deg is not None or self.limits.has_fence:
                 self._apply_setpoint()  # a heading to turn to, or a fence to keep: re-checked every turn
         hold_s = self._params.get("COM_FAIL_ACT_T")
         if self.failsafe is FailsafeStage.HOLD and now - self._failsafe_since_s >= hold_s:
@@ -336,21 +334,12 @@ class Commander:
                 raise
             log.debug("%s on the ground: %s", mode.name, exc)
 
-    @property
-    def _fenced(self) -> bool:
-        return self.limits.fence_radius_m is not None or self.limits.fence_max_altitude_m is not None
-
     def _apply_setpoint(self) -> None:
         if self._setpoint is None:
             return
-        p, lim = self._params, self.limits
-        yaw_limit = min(p.get("MPC_YAWRAUTO_MAX"), lim.max_yaw_rate_deg_s)
-        sp = self._setpoint.limited(
-            min(p.get("MPC_XY_VEL_MAX"), lim.max_horizontal_speed_m_s),
-            min(p.get("MPC_Z_VEL_MAX_UP"), lim.max_up_m_s),
-            min(p.get("MPC_Z_VEL_MAX_DN"), lim.max_down_m_s),
-            yaw_limit,
-        )
+        limits = speed_limits(self._params, self.limits)
+        yaw_limit = limits[3]
+        sp = self._setpoint.limited(*limits)
         kinematics = self._model.kinematics()
         yawspeed = sp.yawspeed_deg_s
         if sp.yaw_deg is not None:
@@ -370,28 +359,14 @@ class Commander:
             log.warning("setpoint not flown: %s", exc)
 
     def _fence(self, north: float, east: float, down: float) -> tuple[float, float, float] | None:
-        """The NED velocity without what would carry the drone past the fence within the lookahead;
-        None when nothing had to be dropped (or there is no fence)."""
-        radius, ceiling = self.limits.fence_radius_m, self.limits.fence_max_altitude_m
-        if radius is None and ceiling is None:
-            return None
-        position = self._model.kinematics().position_ned_m
-        n, e, d = (float(v) for v in position)
-        stopped = False
-        r = math.hypot(n, e)
-        outward = (north * n + east * e) / r if r > 1e-6 else 0.0
-        if radius is not None and outward > 0.0 and r + outward * FENCE_LOOKAHEAD_S >= radius:
-            north, east = north - outward * n / r, east - outward * e / r
-            stopped = True
-        if ceiling is not None and down < 0.0 and -d - down * FENCE_LOOKAHEAD_S >= ceiling:
-            down = 0.0
-            stopped = True
-        if not stopped:
+        """`fenced_velocity` of the vehicle's limits here; said once when it first stops something."""
+        fenced = fenced_velocity(self.limits, self._model.kinematics().position_ned_m, (north, east, down))
+        if fenced is None:
             return None
         if self.fence_stops == 0:
             self.say(mavlink.MAV_SEVERITY_WARNING, "Geofence: motion towards the fence stopped")
         self.fence_stops += 1
-        return north, east, down
+        return fenced
 
     def _trigger_failsafe(self, now: float) -> None:
         self.failsafe = FailsafeStage.HOLD

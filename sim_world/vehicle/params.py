@@ -205,3 +205,10 @@ def parse_param_overrides(items: Iterable[str]) -> dict[str, float]:
         except ValueError:
             raise ParamError(f"parameter override {item!r}: {text!r} is not a number") from None
     return out
+
+
+def checked_overrides(overrides: Mapping[str, float]) -> dict[str, float]:
+    """`overrides` if every one names a parameter the vehicle serves with a value in its range (checked
+    now, before anything starts), else ParamError naming the first that does not."""
+    ParameterStore(overrides=overrides)
+    return dict(overrides)

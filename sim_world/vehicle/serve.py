@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import sys
 import threading
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
@@ -77,6 +78,14 @@ class SimVehicleRun:
     video_faults: VideoFaults | None = None
     dies_at_s: float | None = None
     """An injected fault: the vehicle process kills itself (SIGKILL) at this simulated time."""
+
+    def __post_init__(self) -> None:
+        if self.duration_s is not None and not self.duration_s > 0:
+            raise ValueError(f"duration_s must be > 0 (or none: until stopped), got {self.duration_s}")
+        if not 32 <= self.image_size_px <= 1024:
+            raise ValueError(f"image_size_px must be in [32, 1024], got {self.image_size_px}")
+        if not self.status_every_s >= 0:
+            raise ValueError(f"status_every_s must be >= 0, got {self.status_every_s}")
 
 
 @dataclass(frozen=True)
@@ -214,8 +223,7 @@ def serve(
     try:
         stats = run_sim_vehicle(run, stop, on_ready=ready, on_end=end)
     except (OSError, SimVehicleError, VideoError) as exc:
-        out.write(f"sim-vehicle failed: {exc}\n")
-        out.flush()
+        print(f"sim-vehicle failed: {exc}", file=sys.stderr, flush=True)  # a launcher reads both
         return 1
     out.write(
         f"sim-vehicle: {stats.sim_s:.1f} s simulated in {stats.wall_s:.1f} s "

@@ -40,7 +40,7 @@ def main(argv: list[str]) -> int:
         return 0
     name, rest = argv[0], argv[1:]
     if name not in BENCHMARKS:
-        print(f"dronectl bench: unknown benchmark {name!r}\n\n{_usage()}", file=sys.stderr)
+        print(f"dronectl bench: unknown benchmark {name!r} (one of {', '.join(BENCHMARKS)})", file=sys.stderr)
         return 2
     module = importlib.import_module(BENCHMARKS[name][0])
     return int(module.main(rest) or 0)

@@ -36,7 +36,7 @@ from controller.missions.schema import (
     load_mission,
 )
 from drone_inspect_core.files import OutputDirError
-from dronectl.options import add_signing_key, signing_key
+from dronectl.options import CommandParser, add_signing_key, at_least, say_error, seed_value, signing_key
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[2] / "missions" / "default.yaml"
 
@@ -107,15 +107,15 @@ def summary_lines(result: MissionResult) -> list[str]:
 
 
 def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="dronectl fly", description=__doc__.splitlines()[0])
+    parser = CommandParser(prog="dronectl fly", description=__doc__.splitlines()[0])
     parser.add_argument(
         "--mission", type=Path, default=DEFAULT_MISSION, help="mission YAML (default: %(default)s)"
     )
     parser.add_argument("--planner", choices=PLANNER_NAMES, help="override the mission's planner")
     parser.add_argument("--checkpoint", help="latent planner checkpoint folder (default: the shipped one)")
-    parser.add_argument("--seed", type=int, help="override the scene seed (and a random start's seed)")
+    parser.add_argument("--seed", type=seed_value, help="override the scene seed (and a random start's seed)")
     parser.add_argument("--epsilon-px", type=float, help="override ε, pixels")
-    parser.add_argument("--max-steps", type=int, help="override the step budget")
+    parser.add_argument("--max-steps", type=at_least(1), help="override the step budget")
     parser.add_argument("--vehicle", help="override the vehicle: sim, sim-mavlink, px4-sitl or a MAVLink URL")
     parser.add_argument("--px4", type=Path, help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
     parser.add_argument(
@@ -181,8 +181,8 @@ def main(argv: list[str]) -> int:
     try:
         result = run_mission(mission, out, rerun_path=args.rerun, claimed=True, signing_key=key)
     except Exception as exc:  # could not start: a clear line, not a traceback
-        print(f"dronectl fly: {mission.name} could not start: {type(exc).__name__}: {exc}", file=sys.stderr)
-        print(f"      report: {out / 'report.json'} (why it did not start)", file=sys.stderr)
+        why = f"{type(exc).__name__}: {exc}"
+        say_error("dronectl fly", f"{mission.name} could not start: {why} (report: {out / 'report.json'})")
         return 1
     print("\n".join(summary_lines(result)))
     if args.rerun is not None and args.rerun.exists():

@@ -12,10 +12,11 @@ from pathlib import Path
 
 from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.sim_speed import SimSpeed, parse_sim_speed
+from dronectl.options import CommandParser, seed_value
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.config import SimVehicleConfig
-from sim_world.vehicle.params import ParamError, parse_param_overrides
+from sim_world.vehicle.params import ParamError, checked_overrides, parse_param_overrides
 from sim_world.vehicle.serve import SimVehicleRun, StartPose, serve
 
 
@@ -27,7 +28,7 @@ def _speed(text: str) -> SimSpeed:
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="dronectl sim-vehicle", description=__doc__)
+    ap = CommandParser(prog="dronectl sim-vehicle", description=__doc__)
     net = ap.add_argument_group("MAVLink and video")
     net.add_argument(
         "--instance", type=int, default=0, help="PX4 SITL instance number: shifts every port by N"
@@ -55,7 +56,7 @@ def _parser() -> argparse.ArgumentParser:
         "it steps; above 1 the setpoint-loss and preflight-disarm timers also count wall time",
     )
     sim.add_argument("--scene", type=Path, help="scene YAML file (default: the built-in scene)")
-    sim.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
+    sim.add_argument("--seed", type=seed_value, default=0, help="scene seed (default 0)")
     sim.add_argument("--size", type=int, default=224, help="camera image size in pixels (default 224)")
     sim.add_argument(
         "--start-offset",
@@ -87,7 +88,7 @@ def main(argv: list[str]) -> int:
             sysid=args.sysid,
             speed=args.speed,
             commander=CommanderConfig(arming_boot_delay_s=args.boot_delay),
-            params=parse_param_overrides(args.param),
+            params=checked_overrides(parse_param_overrides(args.param)),
             video=not args.no_video,
             video_port=args.video_port,
             video_host=args.bind,
