@@ -9,6 +9,10 @@
   two runs started at once on one folder exactly one gets it; the other is told who holds it.
   `release_claim(path)` removes the marker once the run has written its first file there.
   A folder that cannot be written (read-only, no space) is refused here, before anything starts.
+- `still_there(file, path)`: whether an open file is still the one at `path`: a recording whose folder
+  was removed under it writes on into a file nobody can find, without an error; this tells it.
+- `set_aside(path)`: an unfinished run's folder renamed out of the way (`<name>.unfinished`,
+  `<name>.unfinished-2`, ...), kept, so a resumed job can start its folder afresh.
 - `claimed_dir(path, what)`: the same claim for a block of work: a failure that leaves the folder
   holding nothing gives it back as it was (an empty folder that existed stays; one made here goes),
   so a command that fails leaves no empty folder behind; on success the claim is released.
@@ -36,7 +40,6 @@ def write_atomic(path: str | Path, data: bytes | str) -> None:
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     payload = data.encode("utf-8") if isinstance(data, str) else data
-    path.parent.mkdir(parents=True, exist_ok=True)
     try:
         with tmp.open("wb") as file:
             file.write(payload)
@@ -114,6 +117,29 @@ def claimed_dir(path: str | Path, what: str = "output folder") -> Iterator[Path]
                 break
         raise
     release_claim(claimed)
+
+
+def still_there(file: Any, path: str | Path) -> bool:
+    """Whether the open `file` is still the file at `path` (False once it, or its folder, was removed or
+    replaced: writes would go on into an unlinked file, lost, and say nothing)."""
+    try:
+        mine, there = os.fstat(file.fileno()), os.stat(path)
+    except (OSError, ValueError):
+        return False
+    return (mine.st_dev, mine.st_ino) == (there.st_dev, there.st_ino)
+
+
+def set_aside(path: str | Path) -> Path | None:
+    """Rename `path` (if it exists) to the first free `<name>.unfinished[-N]` beside it; the new path."""
+    path = Path(path)
+    if not path.exists():
+        return None
+    candidate, n = path.with_name(f"{path.name}.unfinished"), 1
+    while candidate.exists():
+        n += 1
+        candidate = path.with_name(f"{path.name}.unfinished-{n}")
+    os.replace(path, candidate)
+    return candidate
 
 
 def release_claim(path: str | Path) -> None:

@@ -30,9 +30,10 @@ vehicle signed with the key, fresh, reach the client; unsigned, wrongly signed o
 dropped and counted (`unsigned_dropped`), the vehicle's identifying heartbeat included. The .tlog
 holds the signed frames, as they crossed the vehicle's link.
 
-Recording never costs the link: a .tlog write that fails (a full disk, a removed folder) stops the
-recording, says so once (`recording_error`), cuts the file back to its last whole message and
-renames it `*.incomplete.tlog`, and the relay goes on relaying. A send that fails is counted and
+Recording never costs the link: a .tlog write that fails (a full disk; a removed folder, checked each
+second, as writes into one fail silently) stops the recording, says so once (`recording_error`), cuts
+the file back to its last whole message and renames it `*.incomplete.tlog`, and the relay goes on
+relaying. A send that fails is counted and
 dropped; nothing but `close()` ends the relay.
 Only UDP links can be relayed; a serial link's log is not recorded.
 """
@@ -55,6 +56,7 @@ from typing import BinaryIO
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from drone_inspect_core.files import still_there
 from drone_inspect_core.ports import free_port
 from drone_inspect_core.signing import FrameSigner, FrameVerifier, SigningKey
 from flight.errors import ConnectionUrlError
@@ -68,6 +70,7 @@ INCOMPLETE_SUFFIX = ".incomplete.tlog"
 """What a .tlog whose recording stopped early is renamed to end with (`flight.incomplete.tlog`)."""
 _MAX_DATAGRAM = 65535
 _POLL_S = 0.05
+_FILE_CHECK_S = 1.0  # how often the .tlog is checked to still be where it was written
 
 
 def parse_datagram(data: bytes) -> list[mavlink.MAVLink_message]:
@@ -149,6 +152,7 @@ class MavlinkRelay:
         self._client_sock.bind((self.client_host, 0))
         self._file: BinaryIO | None = None
         self._logged_bytes = 0
+        self._next_check_s = 0.0
         if self.path is not None:
             try:
                 self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -300,6 +304,12 @@ class MavlinkRelay:
     def _record(self, messages: list[mavlink.MAVLink_message]) -> None:
         """Append `messages` to the .tlog; on a failed write, stop recording (once) and keep relaying."""
         assert self._file is not None
+        now = time.monotonic()
+        if now >= self._next_check_s and self.path is not None:  # a removed folder gives no write error
+            self._next_check_s = now + _FILE_CHECK_S
+            if not still_there(self._file, self.path):
+                self._stop_recording(OSError(errno.ENOENT, "the file or its folder was removed"))
+                return
         stamp = struct.pack(">Q", int(time.time() * 1e6))
         try:
             for message in messages:

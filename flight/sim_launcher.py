@@ -20,6 +20,7 @@ This module imports nothing of the simulator: a real-vehicle run never loads it.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import logging
 import os
@@ -32,6 +33,8 @@ from collections import deque
 from pathlib import Path
 from types import TracebackType
 from typing import Any
+
+from drone_inspect_core.files import still_there, write_json_atomic
 
 log = logging.getLogger(__name__)
 
@@ -68,9 +71,9 @@ class SimulatorProcess:
         self._reader: threading.Thread | None = None
 
     def start(self) -> SimulatorProcess:
-        try:  # a copy for people; the child reads its config from the pipe
+        try:  # a copy for people, whole or not at all; the child reads its config from the pipe
             self.log_path.parent.mkdir(parents=True, exist_ok=True)
-            self.config_path.write_text(json.dumps(self.config, indent=2))
+            write_json_atomic(self.config_path, self.config)
         except OSError as exc:
             log.warning("%s: could not keep a copy of its config in %s: %s", self.name, self.config_path, exc)
         command = [sys.executable, "-m", self.module, "--config", "-"]
@@ -102,6 +105,7 @@ class SimulatorProcess:
         except OSError as exc:
             log_file = None
             self._log_failed(exc)
+        next_check_s = 0.0
         for raw in self._process.stdout:
             line = raw.decode(errors="replace").rstrip("\n")
             self._tail.append(line)
@@ -111,6 +115,10 @@ class SimulatorProcess:
                     self._ready_line.set()
             if log_file is not None:
                 try:
+                    if time.monotonic() >= next_check_s:  # a removed folder gives no write error
+                        next_check_s = time.monotonic() + 1.0
+                        if not still_there(log_file, self.log_path):
+                            raise OSError(errno.ENOENT, "the log or its folder was removed")
                     log_file.write(raw)
                     log_file.flush()
                 except OSError as exc:

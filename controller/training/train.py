@@ -10,7 +10,6 @@ with the stored-goal rule used at inference; the best epoch is saved.
 from __future__ import annotations
 
 import copy
-import json
 import logging
 import math
 import time
@@ -53,7 +52,7 @@ from controller.training.phrasing import all_phrasings
 from controller.training.train_described import goal_ids as _goal_ids
 from controller.training.train_described import model_input, ranking_terms
 from controller.training.train_described import step_described as _step_described
-from drone_inspect_core.files import claimed_dir
+from drone_inspect_core.files import claimed_dir, write_json_atomic
 
 log = logging.getLogger(__name__)
 METRICS_FILE = "metrics.json"
@@ -279,7 +278,7 @@ def _fit(
         **meta,
         "history": history,
     }
-    (out_dir / METRICS_FILE).write_text(json.dumps(metrics, indent=2) + "\n")
+    write_json_atomic(out_dir / METRICS_FILE, metrics)
     plot_curves(history, out_dir / CURVES_FILE)
     log.info("trained in %.0f s; best val rank-1 %.4f at epoch %d", seconds, best_acc, best_epoch)
     return result

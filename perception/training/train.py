@@ -29,7 +29,7 @@ from tqdm import tqdm
 
 from drone_inspect_core.centring import default_epsilon_px
 from drone_inspect_core.dataset import DatasetError, load_manifest
-from drone_inspect_core.files import claimed_dir
+from drone_inspect_core.files import claimed_dir, write_json_atomic
 from perception.detector_model import STRIDE, CentreNet, DetectorConfig
 from perception.errors import DetectorCheckpointError
 from perception.evaluation.evaluate import DetectorMetrics, evaluate_detections, evaluate_on_dataset
@@ -341,7 +341,7 @@ def _fit(
         "val": val_metrics.as_dict() if val_metrics else None,
         "test": test_metrics.as_dict() if test_metrics else None,
     }
-    (config.out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
+    write_json_atomic(config.out_dir / "metrics.json", metrics)
     if val_metrics:
         log.info("val: %s", val_metrics.summary())
     if test_metrics:

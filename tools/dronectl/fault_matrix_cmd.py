@@ -51,5 +51,6 @@ def main(argv: list[str]) -> int:
         write_atomic(args.out, table)
         print(f"wrote {args.out}", file=sys.stderr)
     if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
         write_json_atomic(args.json, rows, indent=1)
     return 0
