@@ -142,6 +142,21 @@ def set_aside(path: str | Path) -> Path | None:
     return candidate
 
 
+def claim_fresh_dir(base: str | Path, what: str = "output folder") -> Path:
+    """A default output folder claimed for this run: `base`, else `base-2`, `base-3`, ...: the first that
+    nobody holds. Runs started at once (the same default name, the same second) each get their own."""
+    base = Path(base)
+    for n in range(1, 1000):
+        candidate = base if n == 1 else base.with_name(f"{base.name}-{n}")
+        if candidate.exists():
+            continue
+        try:
+            return claim_dir(candidate, what)
+        except OutputDirError:  # another run claimed it first: the next name
+            continue
+    raise OutputDirError(f"no free {what} name beside {base} (999 taken)")
+
+
 def release_claim(path: str | Path) -> None:
     """Remove the claim marker (once the run's first file is in the folder); idempotent."""
     with contextlib.suppress(FileNotFoundError):

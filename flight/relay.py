@@ -150,6 +150,8 @@ class MavlinkRelay:
         self.listen_address = self._vehicle_sock.getsockname()
         self._client_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._client_sock.bind((self.client_host, 0))
+        self.client_side_address = self._client_sock.getsockname()
+        """Where the client's datagrams arrive (the relay sends to the client from here too)."""
         self._file: BinaryIO | None = None
         self._logged_bytes = 0
         self._next_check_s = 0.0

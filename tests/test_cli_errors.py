@@ -102,3 +102,11 @@ def test_a_claimed_folder_is_given_back_as_it_was_when_the_work_fails(tmp_path: 
         (folder / "result.txt").write_text("done")
     assert sorted(p.name for p in folder.iterdir()) == ["result.txt"]  # the claim released
     assert not (folder / CLAIM_MARKER).exists()
+
+
+def test_runs_started_at_once_with_a_default_folder_each_get_their_own(tmp_path: Path) -> None:
+    from drone_inspect_core.files import claim_fresh_dir
+
+    base = tmp_path / "runs" / "fly" / "default-20261125-120000"
+    first, second = claim_fresh_dir(base), claim_fresh_dir(base)  # the same default name, one second
+    assert (first, second) == (base, base.with_name(base.name + "-2"))

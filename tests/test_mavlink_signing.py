@@ -222,3 +222,14 @@ def test_mavsdk_flies_a_signed_vehicle_through_the_relay_only_with_its_key(same_
             flown.arm(10.0)
             assert vehicle.snapshot().armed
         assert vehicle.stats().messages_unsigned == 0
+
+
+def test_the_run_key_reaches_the_sim_vehicle_through_its_pipe_only() -> None:
+    from sim_world.vehicle.serve import SimVehicleRun, run_from_json, run_to_json, secret_json
+
+    key = SigningKey.generate()
+    run = SimVehicleRun(vehicle=SimVehicleConfig(signing_key=key, video=False))
+    kept = run_to_json(run)  # the copy kept beside the report
+    assert key.hex() not in repr(kept) and "signing_key" not in repr(kept)
+    assert run_from_json({**kept, **secret_json(run)}).vehicle.signing_key == key
+    assert run_from_json(kept).vehicle.signing_key is None

@@ -25,6 +25,12 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     ),
     "flight": ("dronectl.bench_flight", "vehicle command and telemetry latency"),
     "px4": ("dronectl.bench_px4", "real PX4 SITL in lockstep: readiness, hover drift, lockstep speed"),
+    "fuzz": ("dronectl.bench_fuzz", "hostile MAVLink against flying missions: crashes, commands obeyed"),
+    "disk-full": ("dronectl.bench_disk_full", "the disk fills mid-flight: landed by the controller?"),
+    "concurrent": (
+        "dronectl.bench_concurrent",
+        "several `fly` at once with defaults: own vehicle, own folder",
+    ),
 }
 
 

@@ -35,7 +35,7 @@ from controller.missions.schema import (
     Px4Spec,
     load_mission,
 )
-from drone_inspect_core.files import OutputDirError
+from drone_inspect_core.files import OutputDirError, claim_fresh_dir
 from dronectl.options import CommandParser, add_signing_key, at_least, say_error, seed_value, signing_key
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[2] / "missions" / "default.yaml"
@@ -160,7 +160,7 @@ def main(argv: list[str]) -> int:
     except (MissionFileError, ValueError) as exc:
         print(f"dronectl fly: {exc}", file=sys.stderr)
         return 2
-    from controller.missions.report import claim_report_dir, fresh_report_dir
+    from controller.missions.report import claim_report_dir
     from controller.missions.runner import run_mission
 
     if args.rerun is not None:
@@ -173,7 +173,8 @@ def main(argv: list[str]) -> int:
             return 2
     default_out = Path("runs") / "fly" / f"{mission.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     try:
-        out = claim_report_dir(args.out or fresh_report_dir(default_out))
+        # A given --out is this run's or an error; a default one is the first free name (runs at once).
+        out = claim_report_dir(args.out) if args.out else claim_fresh_dir(default_out, "report folder")
     except OutputDirError as exc:
         print(f"dronectl fly: --out {exc}", file=sys.stderr)
         return 2
