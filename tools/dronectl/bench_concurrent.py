@@ -7,8 +7,7 @@ from pathlib import Path
 
 import controller.benchmarks.concurrent as bench
 from controller.benchmarks.concurrent import run_concurrent
-from drone_inspect_core.files import write_json_atomic
-from dronectl.options import CommandParser, at_least, new_file
+from dronectl.options import CommandParser, at_least, new_file, write_result
 
 
 def main(argv: list[str]) -> int:
@@ -33,8 +32,6 @@ def main(argv: list[str]) -> int:
         f"{report['shared_system_ids']}, shared ports {report['shared_ports']}; {report['wall_s']:.0f} s "
         f"(load average {report['load_average_before']:.1f} before, {report['cpus']} CPUs)"
     )
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        write_json_atomic(args.json, report)
+    write_result(args.json, report)
     ok = report["flew"] == report["own_folder"] == report["own_vehicle"] == n
     return 0 if ok and not report["shared_system_ids"] and not report["shared_ports"] else 1

@@ -8,8 +8,7 @@ from pathlib import Path
 import controller.benchmarks.disk_full as bench
 from controller.benchmarks.disk_full import MountError, run_disk_full
 from controller.missions.schema import load_mission
-from drone_inspect_core.files import write_json_atomic
-from dronectl.options import CommandParser, at_least, new_file, seed_value
+from dronectl.options import CommandParser, at_least, new_file, seed_value, write_result
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[2] / "missions" / "default.yaml"
 
@@ -53,8 +52,6 @@ def main(argv: list[str]) -> int:
         f"{report['left_as_if_whole']}, centred {report['centred']}/{n}; {report['wall_s']:.0f} s "
         f"(load average {report['load_average_before']:.1f} before, {report['cpus']} CPUs)"
     )
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        write_json_atomic(args.json, report)
+    write_result(args.json, report)
     whole = report["landed_by_controller"] == report["report_complete"] == report["reported_on_console"] == n
     return 0 if whole and report["left_as_if_whole"] == 0 else 1

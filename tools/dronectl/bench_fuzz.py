@@ -10,8 +10,8 @@ from typing import Any
 import controller.benchmarks.fuzz as bench
 from controller.benchmarks.fuzz import FuzzConfig, run_fuzz
 from controller.missions.schema import load_mission
-from drone_inspect_core.files import claimed_dir, write_json_atomic
-from dronectl.options import CommandParser, at_least, new_file, positive_float, seed_value
+from drone_inspect_core.files import claimed_dir
+from dronectl.options import CommandParser, at_least, new_file, positive_float, seed_value, write_result
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[2] / "missions" / "default.yaml"
 
@@ -57,9 +57,7 @@ def main(argv: list[str]) -> int:
         f"{report['centred']}/{report['flown']} missions centred "
         f"(load average {report['load_average_before']:.1f} before, {report['cpus']} CPUs)"
     )
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        write_json_atomic(args.json, json.loads(json.dumps(report, default=str)))
+    write_result(args.json, json.loads(json.dumps(report, default=str)))
     ok = (
         report["crashes"] == 0
         and report["obeyed_from_strangers"] == 0

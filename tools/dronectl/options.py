@@ -22,6 +22,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
 
+from drone_inspect_core.files import write_json_atomic
 from drone_inspect_core.signing import SigningKey
 
 DEBUG = False
@@ -94,6 +95,13 @@ def new_file(text: str) -> Path:
     if not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
         raise argparse.ArgumentTypeError(f"{path}: {folder} is not a folder this program can write in")
     return path
+
+
+def write_result(path: Path | None, data: object) -> None:
+    """A command's `--json FILE` (checked new by `new_file`), written whole, its folder made."""
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(path, data)
 
 
 SIGNING_KEY_HELP = (
