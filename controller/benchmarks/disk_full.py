@@ -147,7 +147,7 @@ def fly_on_a_filling_disk(mission: Mission, disk: Path, fill_at_tlog_bytes: int)
 
 
 def run_disk_full(
-    base: Mission, root: Path, n: int = 20, seed: int = 0, size_kb: int = 2048, max_tlog_kb: int = 200
+    base: Mission, root: Path, n: int = 20, seed: int = 0, size_kb: int = 2048, max_tlog_kb: int = 90
 ) -> dict[str, Any]:
     """`n` missions, each on its own `size_kb` tmpfs under `root`, filled at a random .tlog size up to
     `max_tlog_kb`; the counts of the module docstring."""

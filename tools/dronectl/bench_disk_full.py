@@ -20,6 +20,13 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--seed", type=seed_value, default=0, help="the scenes' and the moments' seed")
     parser.add_argument("--size-kb", type=at_least(256), default=2048, help="each mission's tmpfs, kB")
     parser.add_argument(
+        "--max-tlog-kb",
+        type=at_least(5),
+        default=90,
+        help="the disk fills when the .tlog reaches a random size up to this (default 90 kB: a sim-mavlink "
+        "flight at --sim-speed max logs about 110-130 kB)",
+    )
+    parser.add_argument(
         "--sim-speed", default="max", help="the sim-vehicle's speed, a factor or 'max' (default: max)"
     )
     parser.add_argument("--mission", type=Path, default=DEFAULT_MISSION, help="the mission flown (a file)")
@@ -31,7 +38,7 @@ def main(argv: list[str]) -> int:
         parser.error(str(exc))
     with tempfile.TemporaryDirectory(prefix="bench-disk-full-") as tmp:
         try:
-            report = run_disk_full(base, Path(tmp), n=args.n, seed=args.seed, size_kb=args.size_kb)
+            report = run_disk_full(base, Path(tmp), args.n, args.seed, args.size_kb, args.max_tlog_kb)
         except MountError as exc:
             parser.error(f"{exc.strerror} (mounting a tmpfs needs root)")
     for r in report["runs"]:
