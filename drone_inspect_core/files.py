@@ -4,6 +4,7 @@
   reader sees the old whole file or the new whole file, never half of one. A failed write (a full
   disk, a read-only or removed folder) removes the temporary file and raises: nothing half-written
   is left looking whole.
+- `write_new(path, data)`: the same for a file that must be new (a recording): never over another.
 - `claim_dir(path, what)`: make `path` this run's own output folder, atomically. A new folder, or
   an existing empty one, is claimed by creating the marker `.claim` in it exclusively (O_EXCL), so of
   two runs started at once on one folder exactly one gets it; the other is told who holds it.
@@ -48,6 +49,20 @@ def write_atomic(path: str | Path, data: bytes | str) -> None:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise
+
+
+def write_new(path: str | Path, data: bytes) -> None:
+    """`write_atomic` that never replaces a file: `FileExistsError` if `path` appeared meanwhile (the file
+    is linked into place, which fails where a rename would overwrite)."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with tmp.open("xb") as file:
+            file.write(data)
+        os.link(tmp, path)
+    finally:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
 
 
 def write_json_atomic(path: str | Path, data: Any, indent: int | None = 2) -> None:

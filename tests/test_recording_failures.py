@@ -1,4 +1,4 @@
-"""A recording whose folder is removed mid-flight stops and says so; the flight goes on to its end.
+"""A recording that fails (its folder removed mid-flight, a full disk) stops and says so; the flight goes on.
 
 Writes into a removed folder do not fail (the open file lives on, unlinked): the relay checks each
 second that its .tlog is still there, and the report writer's whole-file writes fail, said once.
@@ -13,6 +13,7 @@ import threading
 import time
 from pathlib import Path
 
+import pytest
 from pymavlink.dialects.v20 import common as M
 
 from flight.relay import MavlinkRelay
@@ -70,3 +71,19 @@ def test_a_report_folder_removed_mid_flight_costs_the_report_not_the_flight(tmp_
     assert removed.is_set()
     assert result.outcome in ("centred", "step_budget"), result.error  # the flight went on to its end
     assert result.recording_errors and not result.report_written
+
+
+def test_a_rerun_recording_that_does_not_fit_is_said_and_never_left_half_written(tmp_path: Path) -> None:
+    pytest.importorskip("rerun", reason="the Rerun SDK is an optional extra")
+    from small_fs import small_filesystem
+
+    from controller.missions.runner import run_mission
+    from controller.missions.schema import Mission
+
+    mission = Mission(name="rerun-full-disk", planner="oracle", detector="truth", max_steps=6)
+    with small_filesystem(tmp_path / "disk", 64) as disk:
+        rrd = disk / "flight.rrd"
+        result = run_mission(mission, tmp_path / "report", media=False, rerun_path=rrd)
+        assert result.outcome == "centred" and result.report_written
+        assert any("Rerun" in e for e in result.recording_errors), result.recording_errors
+        assert list(disk.iterdir()) == []  # neither a truncated .rrd nor its temporary file
