@@ -127,6 +127,8 @@ class MavlinkRelay:
         self.vehicle_address: tuple[str, int] | None = None
         self.foreign_datagrams = 0
         """Datagrams dropped because they came from neither the vehicle nor the client."""
+        self.unidentified_datagrams = 0
+        """Datagrams dropped before the vehicle's heartbeat identified it (PX4 sends others first)."""
         self.send_errors = 0
         self.signed = signing_key is not None
         self.unsigned_dropped = 0
@@ -221,7 +223,7 @@ class MavlinkRelay:
             if not data:
                 return
         if side == "vehicle" and self.vehicle_address is None and not self._identify_vehicle(data, address):
-            self._stranger(address)
+            self.unidentified_datagrams += 1  # the vehicle's own, often, before its first heartbeat: not said
             return
         if self.faults is not None:
             self.faults.submit(time.monotonic(), (side, data))
