@@ -21,7 +21,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from flight.errors import CommandDeniedError, VehicleConnectionError
 from flight.pymavlink_link import MavlinkLink
 from flight.safety import FlightTimeouts
-from flight.types import Telemetry, VelocityBody
+from flight.types import Closable, Telemetry, VelocityBody
 from flight.vehicle import Vehicle
 
 log = logging.getLogger(__name__)
@@ -62,11 +62,15 @@ def detect_autopilot(url: str, timeout_s: float, shown_url: str | None = None) -
 class MavlinkVehicle(Vehicle):
     """The vehicle at a MAVLink URL, flown by the backend its autopilot needs (chosen on `connect()`)."""
 
-    def __init__(self, url: str, autopilot: str = "auto", shown_url: str | None = None) -> None:
+    def __init__(
+        self, url: str, autopilot: str = "auto", shown_url: str | None = None, link: Closable | None = None
+    ) -> None:
+        """`link`: what carries the connection and goes with it (a relay in front), closed last."""
         if autopilot not in ("auto", *AUTOPILOTS):
             raise ValueError(f"autopilot must be auto, px4 or ardupilot, got {autopilot!r}")
         self.url, self.autopilot, self.shown_url = url, autopilot, shown_url
         self.inner: Vehicle | None = None
+        self._link = link
 
     def connect(self, timeout_s: float | None = None) -> None:
         if self.inner is None:
@@ -143,5 +147,10 @@ class MavlinkVehicle(Vehicle):
         return [] if self.inner is None else self.inner.status_texts()
 
     def close(self) -> None:
-        if self.inner is not None:
-            self.inner.close()
+        try:
+            if self.inner is not None:
+                self.inner.close()
+        finally:
+            link, self._link = self._link, None
+            if link is not None:
+                link.close()

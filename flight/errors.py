@@ -14,7 +14,13 @@ class FlightError(Exception):
         self.origin = origin
         self.result = result
         self.detail = detail
+        self.aftermath = ""
         super().__init__(f"{origin}: {result}" + (f" ({detail})" if detail else ""))
+
+    def add_aftermath(self, text: str) -> None:
+        """Say what was done about the failure (the message, and so a report, ends with it)."""
+        self.aftermath = text
+        self.args = (f"{self.args[0]}; {text}",)
 
 
 class ConnectionUrlError(FlightError, ValueError):

@@ -13,7 +13,8 @@ the vehicle's address), it can:
   duplication and reordering, both ways;
 - **meter** what reaches the vehicle (`message_times_s`: setpoints per second as the
   vehicle sees them) and **cut** the uplink (`drop_uplink`: the controller's stream
-  stops, telemetry still flows): the flight benchmark and the backend tests use these.
+  stops, telemetry still flows) or the downlink (`drop_downlink`: telemetry stops, commands
+  still reach the vehicle): the flight benchmark and the backend tests use these.
 
 The relay knows its vehicle: it locks onto the address of the first datagram that holds an
 autopilot's HEARTBEAT (CRC-checked; of `vehicle_system_id` when the run knows the id, as it does
@@ -22,9 +23,17 @@ other sender on the vehicle side is dropped and counted (`foreign_datagrams`), s
 neither feed the client telemetry nor receive its commands. On the client side only the client's
 own port (`client_port` on loopback, where MAVSDK listens and sends from) is heard.
 
-Recording never costs the link: a .tlog write that fails (a full disk, a removed folder) stops the
-recording, says so once (`recording_error`), cuts the file back to its last whole message and
-renames it `*.incomplete.tlog`, and the relay goes on relaying. A send that fails is counted and
+With a signing key (`signing_key`: MAVLink 2 message signing, `drone_inspect_core.signing`) the relay
+signs for a client that cannot: MAVSDK 4's C API has no signing, so every message from the client is
+re-packed signed (its sender and sequence kept) before it goes to the vehicle, and only messages the
+vehicle signed with the key, fresh, reach the client; unsigned, wrongly signed or replayed ones are
+dropped and counted (`unsigned_dropped`), the vehicle's identifying heartbeat included. The .tlog
+holds the signed frames, as they crossed the vehicle's link.
+
+Recording never costs the link: a .tlog write that fails (a full disk; a removed folder, checked each
+second, as writes into one fail silently) stops the recording, says so once (`recording_error`), cuts
+the file back to its last whole message and renames it `*.incomplete.tlog`, and the relay goes on
+relaying. A send that fails is counted and
 dropped; nothing but `close()` ends the relay.
 Only UDP links can be relayed; a serial link's log is not recorded.
 """
@@ -47,7 +56,12 @@ from typing import BinaryIO
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from drone_inspect_core.files import still_there
+from drone_inspect_core.ports import free_port
+from drone_inspect_core.signing import FrameSigner, FrameVerifier, SigningKey
+from flight.errors import ConnectionUrlError
 from flight.link_faults import FaultyDelivery, LinkFaults
+from flight.urls import udpin_address
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +70,7 @@ INCOMPLETE_SUFFIX = ".incomplete.tlog"
 """What a .tlog whose recording stopped early is renamed to end with (`flight.incomplete.tlog`)."""
 _MAX_DATAGRAM = 65535
 _POLL_S = 0.05
+_FILE_CHECK_S = 1.0  # how often the .tlog is checked to still be where it was written
 
 
 def parse_datagram(data: bytes) -> list[mavlink.MAVLink_message]:
@@ -98,19 +113,28 @@ class MavlinkRelay:
         listen_host: str = "127.0.0.1",
         faults: LinkFaults | None = None,
         vehicle_system_id: int | None = None,
+        signing_key: SigningKey | None = None,
     ) -> None:
         self.listen_port = listen_port
         self.client_port = client_port
         self.path = None if tlog_path is None else Path(tlog_path)
         self.client_host = "127.0.0.1"  # the client (MAVSDK) runs on this machine
         self.drop_uplink = False
+        self.drop_downlink = False
         self.uplink_counts: Counter[int] = Counter()
         self.messages_logged = 0
         self.vehicle_system_id = vehicle_system_id
         self.vehicle_address: tuple[str, int] | None = None
         self.foreign_datagrams = 0
         """Datagrams dropped because they came from neither the vehicle nor the client."""
+        self.unidentified_datagrams = 0
+        """Datagrams dropped before the vehicle's heartbeat identified it (PX4 sends others first)."""
         self.send_errors = 0
+        self.signed = signing_key is not None
+        self.unsigned_dropped = 0
+        """Messages from the vehicle side dropped for a missing, wrong or replayed signature."""
+        self._signer = None if signing_key is None else FrameSigner(signing_key)
+        self._verifier = None if signing_key is None else FrameVerifier(signing_key)
         self.recording_error: str | None = None
         """Why the .tlog stopped early (None while it records, or when it finished whole)."""
         self.faults = FaultyDelivery(faults) if faults is not None and faults.active else None
@@ -128,8 +152,11 @@ class MavlinkRelay:
         self.listen_address = self._vehicle_sock.getsockname()
         self._client_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._client_sock.bind((self.client_host, 0))
+        self.client_side_address = self._client_sock.getsockname()
+        """Where the client's datagrams arrive (the relay sends to the client from here too)."""
         self._file: BinaryIO | None = None
         self._logged_bytes = 0
+        self._next_check_s = 0.0
         if self.path is not None:
             try:
                 self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -183,23 +210,52 @@ class MavlinkRelay:
             data, address = sock.recvfrom(_MAX_DATAGRAM)
         except OSError:  # an ICMP error from an earlier send, or a socket being closed
             return
-        known = self.vehicle_address is not None
-        if (
-            side == "vehicle"
-            and address != self.vehicle_address
-            and (known or not self._identify_vehicle(data, address))
-        ):
+        if side == "vehicle" and self.vehicle_address is not None and address != self.vehicle_address:
             self._stranger(address)
             return
         if side == "client" and address != (self.client_host, self.client_port):
             self._stranger(address)
             return
-        if side == "client" and self.drop_uplink:
+        if (side == "client" and self.drop_uplink) or (side == "vehicle" and self.drop_downlink):
+            return
+        if self._signer is not None:
+            data = self._signed(data) if side == "client" else self._verified(data)
+            if not data:
+                return
+        if side == "vehicle" and self.vehicle_address is None and not self._identify_vehicle(data, address):
+            self.unidentified_datagrams += 1  # the vehicle's own, often, before its first heartbeat: not said
             return
         if self.faults is not None:
             self.faults.submit(time.monotonic(), (side, data))
         else:
             self._send(side, data)
+
+    def _signed(self, data: bytes) -> bytes:
+        """The client's messages in `data`, each re-packed signed with the key."""
+        assert self._signer is not None
+        out = []
+        for message in parse_datagram(data):
+            try:
+                out.append(self._signer.sign(message))
+            except Exception as exc:  # a message pymavlink cannot pack again: not sent unsigned either
+                log.warning("MAVLink relay: could not sign %s from the client: %r", message.get_type(), exc)
+        return b"".join(out)
+
+    def _verified(self, data: bytes) -> bytes:
+        """The frames of `data` signed with the key and fresh; the others are counted and dropped."""
+        assert self._verifier is not None
+        out = []
+        for message in parse_datagram(data):
+            frame = bytes(message.get_msgbuf())
+            if self._verifier.verify(frame):
+                out.append(frame)
+            else:
+                self.unsigned_dropped += 1
+                if self.unsigned_dropped == 1:
+                    log.warning(
+                        "MAVLink relay: dropping %s: not signed with the link's key", message.get_type()
+                    )
+        return b"".join(out)
 
     def _identify_vehicle(self, data: bytes, address: tuple[str, int]) -> bool:
         """Lock onto `address` if `data` holds the vehicle's heartbeat; True if it did."""
@@ -252,6 +308,12 @@ class MavlinkRelay:
     def _record(self, messages: list[mavlink.MAVLink_message]) -> None:
         """Append `messages` to the .tlog; on a failed write, stop recording (once) and keep relaying."""
         assert self._file is not None
+        now = time.monotonic()
+        if now >= self._next_check_s and self.path is not None:  # a removed folder gives no write error
+            self._next_check_s = now + _FILE_CHECK_S
+            if not still_there(self._file, self.path):
+                self._stop_recording(OSError(errno.ENOENT, "the file or its folder was removed"))
+                return
         stamp = struct.pack(">Q", int(time.time() * 1e6))
         try:
             for message in messages:
@@ -307,3 +369,30 @@ class MavlinkRelay:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.close()
+
+
+def relay_in_front(
+    url: str,
+    tlog_path: str | Path | None = None,
+    faults: LinkFaults | None = None,
+    signing_key: SigningKey | None = None,
+) -> tuple[MavlinkRelay | None, str]:
+    """A relay taking a `udpin://HOST:PORT` vehicle link, and the loopback URL MAVSDK listens on behind it
+    (a free port); for any other link (None, `url`): flown directly, without a .tlog.
+
+    With `signing_key` the link is signed, which only the relay can do for MAVSDK: a link that cannot
+    be relayed (serial, TCP, udpout) is refused with `ConnectionUrlError` rather than flown unsigned.
+    """
+    address = udpin_address(url)
+    if address is None:
+        if signing_key is not None:
+            raise ConnectionUrlError(
+                url,
+                "MAVLink signing needs a udpin:// link: the relay in front of MAVSDK signs (MAVSDK "
+                "cannot), and only UDP is relayed",
+            )
+        return None, url
+    host, port = address
+    client_port = free_port("udp")
+    relay = MavlinkRelay(port, client_port, tlog_path, host, faults, signing_key=signing_key)
+    return relay, f"udpin://127.0.0.1:{client_port}"

@@ -158,6 +158,10 @@ class SafeVehicle(Vehicle):
     def disarm(self, timeout_s: float | None = None) -> None:
         self.inner.disarm(timeout_s or self.limits.timeouts.disarm_s)
 
+    def send_land(self) -> bool:
+        self._leave_offboard()
+        return self.inner.send_land()
+
     def telemetry(self) -> Telemetry:
         return self.inner.telemetry()
 

@@ -145,16 +145,32 @@ def clip_geofence(
     return VelocityBody(forward, right, components[2], velocity.yawspeed_deg_s)
 
 
-def safe_stop(vehicle: Vehicle) -> None:
+LAST_LAND_SENT = "the link was lost: a last LAND was sent and acknowledged; its landing could not be watched"
+LAST_LAND_UNCONFIRMED = (
+    "the link was lost: a last LAND was sent but could not be confirmed; the vehicle's own failsafe "
+    "must bring it down"
+)
+
+
+def safe_stop(vehicle: Vehicle) -> str:
     """Best effort: hold, leave offboard, land if in the air, disarm; failures are logged, not raised.
 
-    A vehicle that no longer answers gets no commands (each would only time out): the stop ends at once.
+    A vehicle that no longer answers still gets one LAND (`Vehicle.send_land`: telemetry may be gone
+    while commands still get through), and nothing else; the return value says what came of it ("" when
+    the vehicle answered).
     """
     try:
         vehicle.telemetry()
     except LinkLostError as exc:
-        log.error("safe stop: the vehicle is not answering (%s); nothing can be commanded from here", exc)
-        return
+        log.error("safe stop: the vehicle is not answering (%s); sending a last LAND", exc)
+        try:
+            acknowledged = vehicle.send_land()
+        except FlightError as land_error:
+            log.error("safe stop: the last LAND could not be sent: %s", land_error)
+            acknowledged = False
+        said = LAST_LAND_SENT if acknowledged else LAST_LAND_UNCONFIRMED
+        log.error("safe stop: %s", said)
+        return said
     steps = (("hold", vehicle.hold), ("stop offboard", vehicle.stop_offboard))
     for name, step in steps:
         try:
@@ -163,25 +179,34 @@ def safe_stop(vehicle: Vehicle) -> None:
             log.warning("safe stop: %s failed: %s", name, exc)
     try:
         in_air = vehicle.telemetry().in_air
+    except LinkLostError:  # lost while holding: the last word is a LAND
+        return safe_stop(vehicle)
     except FlightError as exc:
         log.error("safe stop: no telemetry (%s); cannot land the vehicle from here", exc)
-        return
+        return ""
     for name, step in (("land", vehicle.land), ("disarm", vehicle.disarm)):
         if name == "land" and not in_air:
             continue
         try:
             step()
+        except LinkLostError as exc:  # lost on the way down: the last word is still a LAND
+            log.error("safe stop: %s: the link was lost (%s)", name, exc)
+            return safe_stop(vehicle) if name == "land" else ""
         except FlightError as exc:
             log.error("safe stop: %s failed: %s", name, exc)
-            return
+            return ""
+    return ""
 
 
 @contextmanager
 def flight_guard(vehicle: Vehicle) -> Iterator[Vehicle]:
-    """Run a flight; on Ctrl-C or any exception, `safe_stop` the vehicle and re-raise."""
+    """Run a flight; on Ctrl-C or any exception, `safe_stop` the vehicle and re-raise (a flight error
+    then also says what came of a last LAND sent after a lost link)."""
     try:
         yield vehicle
     except (Exception, KeyboardInterrupt) as exc:
         log.error("flight interrupted (%s: %s): holding, then landing", type(exc).__name__, exc)
-        safe_stop(vehicle)
+        aftermath = safe_stop(vehicle)
+        if aftermath and isinstance(exc, FlightError):
+            exc.add_aftermath(aftermath)
         raise

@@ -9,9 +9,11 @@ what makes the PyBullet and MAVSDK results comparable.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 
+from drone_inspect_core.signing import SigningKey
 from flight.moves import MoveResult, execute_move
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, flight_guard
@@ -19,6 +21,9 @@ from flight.types import VelocityBody
 from flight.vehicle import Vehicle
 
 log = logging.getLogger(__name__)
+
+MAX_MOVE_M = 5.0
+"""The longest move along an axis: the default geofence's half-width (a longer one cannot be flown)."""
 
 SIM_VEHICLE = "sim"
 """`--vehicle sim`: the in-process PyBullet backend (no MAVLink)."""
@@ -37,6 +42,12 @@ class MoveFlight:
     settle_timeout_s: float = 5.0
 
     def __post_init__(self) -> None:
+        for name in ("right_m", "forward_m", "down_m"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and abs(value) <= MAX_MOVE_M):
+                raise ValueError(
+                    f"MoveFlight.{name} must be a distance within ±{MAX_MOVE_M:g} m, got {value}"
+                )
         if not self.speed_m_s > 0:
             raise ValueError(f"MoveFlight.speed_m_s must be > 0, got {self.speed_m_s}")
         if not self.takeoff_alt_m > 0:
@@ -120,16 +131,26 @@ def fly_move(
     return MoveFlightResult(move, FlightTimings(*marks), safe.status_texts())
 
 
-def open_vehicle(spec: str, seed: int = 0) -> Vehicle:
+def open_vehicle(spec: str, seed: int = 0, signing_key: SigningKey | None = None) -> Vehicle:
     """`sim` → an in-process `PyBulletVehicle` (seeded); anything else is a MAVLink connection URL, flown
-    with MAVSDK (PX4) or in GUIDED mode (ArduPilot) as its heartbeat says (`flight.autopilots`).
+    with MAVSDK (PX4) or in GUIDED mode (ArduPilot) as its heartbeat says (`flight.autopilots`), behind a
+    relay where it is `udpin://` (which signs the link with `signing_key`: `flight.relay.relay_in_front`).
 
     Imports each backend only when asked, so that a real-vehicle run never loads PyBullet.
     """
     if spec == SIM_VEHICLE:
+        if signing_key is not None:
+            raise ValueError("a signing key is for a MAVLink vehicle, not the in-process simulation")
         from flight.pybullet_backend import PyBulletVehicle
 
         return PyBulletVehicle.create(seed=seed)
     from flight.autopilots import MavlinkVehicle
+    from flight.relay import relay_in_front
 
-    return MavlinkVehicle(spec)
+    relay, url = relay_in_front(spec, signing_key=signing_key)
+    try:
+        return MavlinkVehicle(url, shown_url=spec, link=relay)
+    except BaseException:
+        if relay is not None:
+            relay.close()
+        raise

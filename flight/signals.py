@@ -23,10 +23,12 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 class StopRequested(KeyboardInterrupt):
-    """A stop signal arrived (SIGINT, SIGTERM or SIGHUP); `signal_name` says which."""
+    """A stop signal arrived (SIGINT, SIGTERM or SIGHUP); `signal_name` says which, `exit_code` is the
+    shell's code for a process that signal ended (128 + its number: 130, 143, 129)."""
 
     def __init__(self, signal_name: str) -> None:
         self.signal_name = signal_name
+        self.exit_code = 128 + int(signal.Signals[signal_name])
         super().__init__(signal_name)
 
     def __str__(self) -> str:

@@ -3,9 +3,10 @@
 The child runs in its own session, so a Ctrl-C in the terminal reaches only the
 controller (which lands first and then stops the child); it watches its parent and
 stops by itself within a second when the parent dies, however the parent dies. It
-reads its config from a pipe (`--config -`) and prints one line `<prefix>{json}` when it
-is ready; `start()` waits for that line (or for the child's exit, reported with the end
-of its output) and `ready` holds the JSON.
+reads its config from a pipe (`--config -`; `secrets`, such as a run's signing key, are added
+there and nowhere else: the copy of the config kept beside the log leaves them out) and prints
+one line `<prefix>{json}` when it is ready; `start()` waits for that line (or for the child's
+exit, reported with the end of its output) and `ready` holds the JSON.
 
 The child's output comes through a pipe that a reader thread drains all the time and
 copies into `log_path` as a record: a log that cannot be written (a full disk, a removed
@@ -19,6 +20,7 @@ This module imports nothing of the simulator: a real-vehicle run never loads it.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import logging
 import os
@@ -33,6 +35,7 @@ from types import TracebackType
 from typing import Any
 
 from drone_inspect_core.config_files import to_json
+from drone_inspect_core.files import still_there, write_json_atomic
 
 log = logging.getLogger(__name__)
 
@@ -54,10 +57,13 @@ class SimulatorProcess:
         ready_prefix: str,
         start_timeout_s: float = 90.0,
         name: str = "simulator",
+        secrets: dict[str, Any] | None = None,
     ) -> None:
         self.module, self.log_path = module, Path(log_path)
         self.config: dict[str, Any] = to_json(config)
-        """The child's config as JSON (`drone_inspect_core.config_files.to_json` of a config object)."""
+        """The child's config as JSON (`drone_inspect_core.config_files.to_json` of a config object), kept
+        beside its log; `secrets` (a signing key) travel through the child's stdin only."""
+        self._secrets = dict(secrets or {})
         self.ready_prefix, self.start_timeout_s, self.name = ready_prefix, start_timeout_s, name
         self.config_path = self.log_path.with_suffix(".json")
         self.ready: dict[str, Any] = {}
@@ -69,9 +75,9 @@ class SimulatorProcess:
         self._reader: threading.Thread | None = None
 
     def start(self) -> SimulatorProcess:
-        try:  # a copy for people; the child reads its config from the pipe
+        try:  # a copy for people, whole or not at all; the child reads its config from the pipe
             self.log_path.parent.mkdir(parents=True, exist_ok=True)
-            self.config_path.write_text(json.dumps(self.config, indent=2))
+            write_json_atomic(self.config_path, self.config)
         except OSError as exc:
             log.warning("%s: could not keep a copy of its config in %s: %s", self.name, self.config_path, exc)
         command = [sys.executable, "-m", self.module, "--config", "-"]
@@ -87,7 +93,7 @@ class SimulatorProcess:
         try:
             assert self._process.stdin is not None
             with self._process.stdin:
-                self._process.stdin.write(json.dumps(self.config).encode())
+                self._process.stdin.write(json.dumps({**self.config, **self._secrets}).encode())
             self._wait_ready()
         except BaseException:
             self.close()
@@ -103,6 +109,7 @@ class SimulatorProcess:
         except OSError as exc:
             log_file = None
             self._log_failed(exc)
+        next_check_s = 0.0
         for raw in self._process.stdout:
             line = raw.decode(errors="replace").rstrip("\n")
             self._tail.append(line)
@@ -112,6 +119,10 @@ class SimulatorProcess:
                     self._ready_line.set()
             if log_file is not None:
                 try:
+                    if time.monotonic() >= next_check_s:  # a removed folder gives no write error
+                        next_check_s = time.monotonic() + 1.0
+                        if not still_there(log_file, self.log_path):
+                            raise OSError(errno.ENOENT, "the log or its folder was removed")
                     log_file.write(raw)
                     log_file.flush()
                 except OSError as exc:

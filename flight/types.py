@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import Enum
+from typing import Protocol
 
 
 @dataclass(frozen=True)
@@ -127,3 +128,9 @@ class Displacement:
     @property
     def horizontal_m(self) -> float:
         return math.hypot(self.north_m, self.east_m)
+
+
+class Closable(Protocol):
+    """Something a vehicle owns and closes last (the relay in front of its link)."""
+
+    def close(self) -> None: ...

@@ -94,6 +94,13 @@ class Vehicle(abc.ABC):
         """Messages the autopilot sent (STATUSTEXT), oldest first; empty where there are none."""
         return []
 
+    def send_land(self) -> bool:
+        """Command LAND once, watching no telemetry: the last word to a vehicle whose link was lost (its
+        uplink may still work). True when the vehicle acknowledged it; False when nothing says it landed
+        or will. A backend without a link to lose lands as `land()` does."""
+        self.land()
+        return True
+
     def __enter__(self) -> Vehicle:
         return self
 

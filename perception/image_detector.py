@@ -36,8 +36,9 @@ import cv2
 import numpy as np
 import torch
 import torch.nn.functional as F
-from safetensors.torch import load_file, save_file
+from safetensors.torch import load_file, save
 
+from drone_inspect_core.files import write_atomic, write_json_atomic
 from drone_inspect_core.onnx_runtime import OnnxModule, onnx_for
 from perception.attributes import read_attribute
 from perception.detector_model import EDGE_SCALE_PX, STRIDE, CentreNet, DetectorConfig, fuse_for_inference
@@ -61,9 +62,9 @@ def save_checkpoint(run_dir: Path, model: CentreNet, extra: dict[str, object] | 
     """Write `model.safetensors` and `config.json` (format tag, detector config, `extra` info)."""
     run_dir.mkdir(parents=True, exist_ok=True)
     state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
-    save_file(state, str(run_dir / WEIGHTS_FILE))
+    write_atomic(run_dir / WEIGHTS_FILE, save(state))  # whole or not at all, as every file here
     payload = {"format": CHECKPOINT_FORMAT, "detector": model.config.to_json_dict(), **(extra or {})}
-    (run_dir / CONFIG_FILE).write_text(json.dumps(payload, indent=2) + "\n", encoding="utf-8")
+    write_json_atomic(run_dir / CONFIG_FILE, payload)
 
 
 def load_config(run_dir: Path) -> DetectorConfig:

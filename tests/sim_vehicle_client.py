@@ -6,13 +6,22 @@ message with its arrival time on a reader thread, and offers waits with timeouts
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
+
+from drone_inspect_core.signing import SigningKey, enable_signing
+from sim_world.rendering.camera import CameraConfig
+from sim_world.vehicle.commander import CommanderConfig
+from sim_world.vehicle.config import SimVehicleConfig
+from sim_world.vehicle.server import SimVehicle
+from sim_world.vehicle.world_model import WorldVehicleModel
+from sim_world.world import World, WorldConfig
 
 Msg = mavlink.MAVLink_message
 WAIT_SLACK = 4.0
@@ -104,6 +113,13 @@ class MavlinkTestClient:
         return self.wait_for("HEARTBEAT", timeout_s, after=t)
 
     # ----------------------------------------------------------------- sending
+    def sign_with(self, key: SigningKey | None) -> None:
+        """Sign everything sent from now on with `key` (None: send unsigned again)."""
+        if key is None:
+            self._mav.signing.sign_outgoing = False
+        else:
+            enable_signing(self._mav, key)
+
     def send(self, msg: Msg) -> None:
         if self.vehicle is None:
             raise RuntimeError("no heartbeat from the vehicle yet")
@@ -138,3 +154,23 @@ class MavlinkTestClient:
         t0 = time.monotonic()
         time.sleep(seconds)
         return len([r for r in self.since(t0, kind) if r.t <= t0 + seconds]) / seconds
+
+
+@contextlib.contextmanager
+def served_vehicle(**config: object) -> Iterator[tuple[MavlinkTestClient, SimVehicle]]:
+    """A sim-vehicle (the real PyBullet world, 64 px, no video) streaming to a test client, its
+    controller, both on free ports; `config`: more `SimVehicleConfig` fields."""
+    with (
+        World(WorldConfig(camera=CameraConfig(width=64, height=64)), seed=0) as world,
+        MavlinkTestClient(0) as client,
+    ):
+        cfg = SimVehicleConfig(
+            remote_port=client.port,
+            local_port=0,
+            video=False,
+            commander=CommanderConfig(arming_boot_delay_s=0.0),
+            **config,  # type: ignore[arg-type]
+        )
+        with SimVehicle(WorldVehicleModel(world), cfg) as vehicle:
+            client.wait_vehicle()
+            yield client, vehicle

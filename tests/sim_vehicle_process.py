@@ -21,11 +21,12 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+from drone_inspect_core.signing import SigningKey
 from flight.errors import VehicleConnectionError
 from flight.sim_launcher import SimulatorProcess, SimulatorStartError
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.config import SimVehicleConfig
-from sim_world.vehicle.serve import READY_PREFIX, SimVehicleRun
+from sim_world.vehicle.serve import READY_PREFIX, SimVehicleRun, secret_json
 
 
 @dataclass(frozen=True)
@@ -42,6 +43,7 @@ class SimVehicleOptions:
     video_fps: float = 2.0
     seed: int = 0
     sysid: int | None = None
+    signing_key: SigningKey | None = None
 
     def run(self) -> SimVehicleRun:
         vehicle = SimVehicleConfig(
@@ -54,6 +56,7 @@ class SimVehicleOptions:
             video=self.video_port is not None,
             video_port=self.video_port,
             video_fps=self.video_fps,
+            signing_key=self.signing_key,
         )
         return SimVehicleRun(vehicle=vehicle, seed=self.seed, image_size_px=self.image_size_px)
 
@@ -66,13 +69,15 @@ class SimVehicleProcess:
         self._folder = Path(tempfile.mkdtemp(prefix="sim-vehicle-"))
         self.log_path = self._folder / "sim_vehicle.log"
         self.started_s = time.perf_counter()
+        run = options.run()
         self._process = SimulatorProcess(
             "sim_world.vehicle",
-            options.run(),
+            run,
             self.log_path,
             READY_PREFIX,
             start_timeout_s=start_timeout_s,
             name="sim-vehicle",
+            secrets=secret_json(run),
         )
         try:
             self._process.start()

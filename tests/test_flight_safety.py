@@ -8,10 +8,10 @@ import time
 import pytest
 from fake_vehicle import FakeVehicle
 
-from flight.errors import FlightError, GeofenceBreachError
+from flight.errors import FlightError, GeofenceBreachError, LinkLostError
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import GeofenceBox, SafetyLimits, clip_speed, flight_guard, safe_stop
-from flight.types import FlightMode, VelocityBody
+from flight.types import FlightMode, Telemetry, VelocityBody
 
 LIMITS = SafetyLimits(max_horizontal_speed_m_s=1.0, max_vertical_speed_m_s=0.5, max_yaw_rate_deg_s=30.0)
 
@@ -230,3 +230,30 @@ def test_sigterm_and_sighup_stop_like_ctrl_c_and_a_second_signal_does_not_abort_
         assert info.value.signal_name == signal.Signals(signum).name
         assert landed == [True]
     assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL  # handlers restored after the block
+
+
+@pytest.mark.parametrize("acknowledged", [True, False])
+def test_after_a_lost_link_the_guard_still_sends_a_land_and_says_what_came_of_it(acknowledged: bool) -> None:
+    class LostLink(FakeVehicle):
+        lost = False
+
+        def telemetry(self) -> Telemetry:
+            if self.lost:
+                raise LinkLostError("telemetry()", 2.1, 2.0)
+            return super().telemetry()
+
+        def send_land(self) -> bool:
+            self.calls.append("send_land")
+            return acknowledged
+
+    fake = LostLink()
+    vehicle = flying(fake)
+    fake.calls.clear()
+    with pytest.raises(LinkLostError) as caught, flight_guard(vehicle):
+        fake.lost = True
+        vehicle.telemetry()
+    assert fake.calls == ["send_land"]  # nothing that waits on telemetry, and the LAND all the same
+    message = str(caught.value)
+    assert message.startswith("telemetry(): LINK_LOST")
+    assert ("acknowledged" in message) == acknowledged
+    assert ("could not be confirmed" in message) == (not acknowledged)

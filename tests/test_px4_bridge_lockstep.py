@@ -9,7 +9,12 @@ and it notices a PX4 that hangs up.
 
 from __future__ import annotations
 
+import math
+import os
+import random
 import socket
+import subprocess
+import sys
 import threading
 import time
 
@@ -17,6 +22,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
+from controller.benchmarks.hostile_mavlink import hostile_messages, random_datagrams
 from sim_world.px4_bridge.bridge import PX4_CLOCK_OFFSET_US, BridgeTiming, CameraClock, Px4Bridge
 from sim_world.px4_bridge.geodesy import HomePoint, magnetic_field_ned_gauss
 from sim_world.px4_bridge.link import Px4DisconnectedError, SimulatorLinkError, SimulatorServer
@@ -28,8 +34,18 @@ from sim_world.world import World, WorldConfig
 class FakePx4Client:
     """Connects like PX4, records HIL_SENSOR times, answers each with actuator outputs after `delay_s`."""
 
-    def __init__(self, port: int, motors: float = 0.0, armed: bool = False, delay_s: float = 0.0) -> None:
-        self.motors, self.armed, self.delay_s = motors, armed, delay_s
+    def __init__(
+        self,
+        port: int,
+        motors: float = 0.0,
+        armed: bool = False,
+        delay_s: float = 0.0,
+        hostile: random.Random | None = None,
+    ) -> None:
+        """`hostile`: also send, after each answer, junk drawn from it (garbage bytes, valid messages of
+        every type with extreme values, actuator answers with NaN, infinite or absurd fields)."""
+        self.motors, self.armed, self.delay_s, self.hostile = motors, armed, delay_s, hostile
+        self.junk_sent = 0
         self.sensor_times: list[int] = []
         self.answered_at: list[float] = []
         self.gps_messages = 0
@@ -65,7 +81,22 @@ class FakePx4Client:
                 controls = [self.motors] * 4 + [0.0] * 12
                 answer = mavlink.MAVLink_hil_actuator_controls_message(msg.time_usec, controls, mode | 1, 1)
                 self.answered_at.append(time.monotonic())
-                self._sock.sendall(answer.pack(self._mav))
+                self._sock.sendall(answer.pack(self._mav) + self._junk(msg.time_usec))
+
+    def _junk(self, time_usec: int) -> bytes:
+        rng = self.hostile
+        if rng is None:
+            return b""
+        self.junk_sent += 3
+        odd = rng.choice((math.nan, math.inf, -math.inf, 1e38, -1e38, 2.0, -2.0))
+        extreme = mavlink.MAVLink_hil_actuator_controls_message(
+            rng.choice((0, time_usec - 4000, 2**64 - 1)),
+            [odd] * 16,
+            rng.randrange(256),
+            rng.choice((0, 1, 2**64 - 1)),
+        )
+        garbage = random_datagrams(rng, 1)[0] + hostile_messages(rng, 1, (0, 1))[0]
+        return garbage + extreme.pack(self._mav)
 
     def hang_up(self) -> None:
         self._stop.set()
@@ -197,3 +228,47 @@ def test_a_simulator_port_in_use_is_named(free_tcp_port: int) -> None:
     with SimulatorServer("127.0.0.1", free_tcp_port), pytest.raises(SimulatorLinkError) as info:
         SimulatorServer("127.0.0.1", free_tcp_port)
     assert f"127.0.0.1:{free_tcp_port}" in str(info.value)
+
+
+def test_the_bridge_takes_only_its_px4_and_lives_through_hostile_answers(rig) -> None:
+    """The CI-sized fuzz of the bridge: another program dials the simulator port first and is shut out;
+    then PX4 (here a stand-in in this process, which owns its end) mixes garbage, every message type
+    with extreme values and absurd actuator answers into its stream, and the lockstep loop goes on."""
+    world, server, sensors = rig
+    port = server.address[1]
+    stranger = subprocess.Popen(
+        [sys.executable, "-c", _STRANGER, str(port)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        assert stranger.stdout is not None and stranger.stdout.readline().strip() == "connected"
+        fake = FakePx4Client(port, motors=0.55, armed=True, hostile=random.Random(5))
+        server.accept(5.0, expect_pid=os.getpid())
+        assert server.peer == fake._sock.getsockname() and server.refused == 1
+        assert stranger.wait(5.0) == 0, stranger.stdout.read()  # it saw its connection closed
+        with pytest.raises(OSError):
+            socket.create_connection(("127.0.0.1", port), timeout=1.0)  # and nobody connects after PX4
+        bridge = _bridge(world, server, sensors)
+        for _ in range(400):
+            bridge.step()
+        stats = bridge.stats()
+        assert stats.ticks == 400 and stats.answers >= 400 and fake.junk_sent >= 1000
+        assert np.isfinite(world.state().position_enu_m).all()
+        fake.hang_up()
+    finally:
+        stranger.kill()
+
+
+_STRANGER = """
+import socket, sys
+conn = socket.create_connection(("127.0.0.1", int(sys.argv[1])), timeout=5)
+conn.sendall(bytes(range(256)) * 4)
+print("connected", flush=True)
+conn.settimeout(5)
+try:
+    sys.exit(0 if conn.recv(100) == b"" else 1)
+except ConnectionResetError:  # closed with our bytes unread
+    sys.exit(0)
+"""

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import socket
 import stat
 from pathlib import Path
 
@@ -14,8 +15,10 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from drone_inspect_core.config_files import from_json, to_json
+from drone_inspect_core.ports import PortInUseError
 from drone_inspect_core.world_options import StartPose, WindConfig
 from sim_world.px4_bridge.geodesy import HomePoint, magnetic_field_ned_gauss, pressure_hpa, temperature_c
+from sim_world.px4_bridge.instances import px4_instance
 from sim_world.px4_bridge.messages import (
     ACCEL_BITS,
     BARO_BITS,
@@ -29,6 +32,7 @@ from sim_world.px4_bridge.messages import (
 from sim_world.px4_bridge.px4_process import (
     Px4FolderError,
     Px4Options,
+    Px4Ports,
     Px4Process,
     check_px4_dir,
     find_px4_dir,
@@ -237,3 +241,34 @@ def test_simulator_config_survives_json(tmp_path: Path) -> None:
     assert from_json(Px4SimConfig, json.loads(json.dumps(to_json(config)))) == config
     with pytest.raises(ValueError, match="instance"):
         Px4SimConfig(px4_dir=tmp_path, instance=12)
+
+
+def test_a_run_that_chooses_px4s_ports_runs_one_link_on_them(tmp_path: Path) -> None:
+    options = Px4Options(_fake_px4_dir(tmp_path / "px4"), ports=Px4Ports(41001, 41002, 41003))
+    process = Px4Process(options).start()
+    try:
+        links = process.workdir / "bin"
+        assert "simulator_mavlink start -c 41001" in (links / "px4-rc.simulator").read_text()
+        mavlink = (links / "px4-rc.mavlink").read_text()
+        starts = [line for line in mavlink.splitlines() if line.startswith("mavlink start")]
+        assert starts == ["mavlink start -x -u 41002 -r 4000000 -f -m onboard -o 41003"]  # no GCS link
+    finally:
+        process.close()
+    assert not (Px4Process(Px4Options(tmp_path / "px4")).workdir / "bin" / "px4-rc.mavlink").exists()
+
+
+def test_auto_skips_an_instance_whose_port_another_program_holds_and_a_fixed_one_names_it() -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as held:
+        held.bind(("0.0.0.0", 0))
+        port = held.getsockname()[1]
+        with px4_instance("auto") as lowest:  # the lowest instance nobody holds right now
+            pass
+
+        def ports(instance: int) -> list[tuple[str, int, str]]:
+            return [("udp", port, "a port held by someone else")] if instance == lowest else []
+
+        with px4_instance("auto", ports) as instance:  # type: ignore[arg-type]
+            assert instance != lowest
+        taken = f"UDP port {port} \\(a port held by someone else\\)"
+        with pytest.raises(PortInUseError, match=taken), px4_instance(lowest, ports):  # type: ignore[arg-type]
+            pass

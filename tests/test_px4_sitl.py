@@ -31,7 +31,7 @@ from flight.safety import flight_guard
 from flight.sim_launcher import SimulatorProcess
 from flight.types import VelocityBody
 from sim_world.px4_bridge.bridge import PX4_CLOCK_OFFSET_US, BridgeTiming
-from sim_world.px4_bridge.px4_process import px4_instance
+from sim_world.px4_bridge.instances import px4_instance
 from sim_world.px4_bridge.run import READY_PREFIX, Px4SimConfig
 
 pytestmark = [requires_px4, pytest.mark.slow]

@@ -17,8 +17,9 @@ Targets (issue 3): discovery → offboard ≤ 5 s, setpoint stream ≥ 20 Hz, RT
 `--vehicle URL` flies the MAVSDK part against a vehicle that is already running (PX4 SITL
 from `dronectl px4-sim`, a real vehicle on the bench with its propellers off) instead of a
 sim-vehicle it launches; a `udpin://` URL is relayed (the relay takes the URL's port) so the
-setpoint stream is measured too. The takeoff-first reference needs a fresh vehicle and is
-skipped then.
+setpoint stream is measured too; `--signing-key FILE` signs that link (a vehicle set up with the
+key). The takeoff-first reference needs a fresh vehicle and is skipped then. Every port is free per
+run, and a launched sim-vehicle's link is signed with a key made for the run.
 """
 
 from __future__ import annotations
@@ -34,19 +35,20 @@ from typing import Any
 
 import numpy as np
 
+from drone_inspect_core.ports import free_port
+from drone_inspect_core.signing import SigningKey
 from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 from flight.moves import execute_move
 from flight.pybullet_backend import PyBulletVehicle
-from flight.relay import SET_POSITION_TARGET_LOCAL_NED, MavlinkRelay
+from flight.relay import SET_POSITION_TARGET_LOCAL_NED, MavlinkRelay, relay_in_front
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import flight_guard
 from flight.scenario import MoveFlight, fly_move
 from flight.sim_launcher import SimulatorProcess
 from flight.types import VelocityBody
-from flight.urls import udpin_address
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.config import SimVehicleConfig
-from sim_world.vehicle.serve import READY_PREFIX, SimVehicleRun
+from sim_world.vehicle.serve import READY_PREFIX, SimVehicleRun, secret_json
 
 log = logging.getLogger(__name__)
 
@@ -55,13 +57,13 @@ TARGETS = {"discovery_to_offboard_s": 5.0, "setpoint_rate_hz": 20.0, "command_rt
 
 @dataclass(frozen=True)
 class FlightBenchConfig:
-    base_port: int = 14790  # sim binds base, sends to base+1 (relay), MAVSDK listens on base+2
     rtt_samples: int = 200
     stream_window_s: float = 3.0
     boot_delay_s: float = 2.5  # PX4's arming delay after boot
     move: MoveFlight = field(default_factory=MoveFlight)
     seed: int = 0
     vehicle_url: str | None = None  # None: launch a sim-vehicle; else fly the vehicle at this URL
+    signing_key: SigningKey | None = None  # the vehicle's key (`vehicle_url`); a launched one gets its own
 
 
 @dataclass
@@ -81,23 +83,25 @@ class _BenchFlight:
 
 @contextmanager
 def _armed_flight(config: FlightBenchConfig) -> Iterator[_BenchFlight]:
-    """Launch a sim-vehicle (or use `vehicle_url`), discover it, wait until ready, arm (in flight_guard)."""
-    base = config.base_port
+    """Launch a sim-vehicle (or use `vehicle_url`), discover it, wait until ready, arm (in flight_guard).
+
+    Every port is free per run; a launched sim-vehicle's link is signed with a key made for the run."""
     t0 = time.perf_counter()
     with ExitStack() as stack:
-        sim, relay, url = None, None, f"udpin://127.0.0.1:{base + 2}"
+        sim: SimulatorProcess | None = None
         if config.vehicle_url is None:
-            sim = stack.enter_context(
-                _sim_vehicle(base, config.boot_delay_s, Path(stack.enter_context(TemporaryDirectory())))
-            )
-            relay = stack.enter_context(MavlinkRelay(listen_port=base + 1, client_port=base + 2))
-        elif (listen := udpin_address(config.vehicle_url)) is not None:
-            relay = stack.enter_context(
-                MavlinkRelay(listen_port=listen[1], client_port=base + 2, listen_host=listen[0])
-            )
+            key = SigningKey.generate()
+            client_port = free_port("udp")
+            relay: MavlinkRelay | None = stack.enter_context(MavlinkRelay(0, client_port, signing_key=key))
+            assert relay is not None
+            folder = Path(stack.enter_context(TemporaryDirectory()))
+            sim = stack.enter_context(_sim_vehicle(relay.listen_address[1], config.boot_delay_s, folder, key))
+            url = f"udpin://127.0.0.1:{client_port}"
         else:
-            url = config.vehicle_url
-        vehicle = stack.enter_context(MavsdkVehicle(MavsdkConfig(url=url)))
+            relay, url = relay_in_front(config.vehicle_url, signing_key=config.signing_key)
+            if relay is not None:
+                stack.enter_context(relay)
+        vehicle = stack.enter_context(MavsdkVehicle(MavsdkConfig(url=url, shown_url=config.vehicle_url)))
         flight = _BenchFlight(t0, sim, relay, vehicle, SafeVehicle(vehicle))
         flight.mark("sim_ready_s")
         flight.safe.connect()
@@ -112,17 +116,20 @@ def _armed_flight(config: FlightBenchConfig) -> Iterator[_BenchFlight]:
             log.debug("sim-vehicle said: %s", sim.output()[-500:])
 
 
-def _sim_vehicle(port: int, boot_delay_s: float, folder: Path) -> SimulatorProcess:
-    """A sim-vehicle (no video) binding `port` and sending to `port + 1`, through the one launcher."""
+def _sim_vehicle(relay_port: int, boot_delay_s: float, folder: Path, key: SigningKey) -> SimulatorProcess:
+    """A sim-vehicle (no video) on a free port, sending to the relay on `relay_port`, signing with `key`."""
     vehicle = SimVehicleConfig(
         adopt_client=False,
-        local_port=port,
-        remote_port=port + 1,
+        local_port=0,
+        remote_port=relay_port,
         video=False,
         commander=CommanderConfig(arming_boot_delay_s=boot_delay_s),
+        signing_key=key,
     )
     run = SimVehicleRun(vehicle=vehicle)
-    return SimulatorProcess("sim_world.vehicle", run, folder / "sim_vehicle.log", READY_PREFIX)
+    return SimulatorProcess(
+        "sim_world.vehicle", run, folder / "sim_vehicle.log", READY_PREFIX, secrets=secret_json(run)
+    )
 
 
 def _mavsdk_bench(config: FlightBenchConfig) -> dict[str, Any]:

@@ -27,11 +27,13 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
+from drone_inspect_core.ports import free_port
 from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import flight_guard
 from flight.sim_launcher import SimulatorProcess
 from sim_world.px4_bridge.bridge import PX4_CLOCK_OFFSET_US, BridgeTiming
+from sim_world.px4_bridge.instances import px4_instance
 from sim_world.px4_bridge.run import READY_PREFIX, Px4SimConfig
 
 log = logging.getLogger(__name__)
@@ -50,13 +52,15 @@ def hover_run(
     px4_dir: Path, instance: int, camera: bool, hover_s: float, workdir: Path, speed: float | None
 ) -> dict[str, Any]:
     """One PX4 run: readiness, takeoff, a hover; the numbers of the module docstring."""
+    mavsdk_port = free_port("udp")  # PX4 sends here; every other port of the run is free too
     config = Px4SimConfig(
         px4_dir=px4_dir,
         instance=instance,
         camera=camera,
-        video_port=18950 + instance,
+        video_port=0,
         timing=BridgeTiming(speed=speed),
         system_id=77,
+        mavlink_remote_port=mavsdk_port,
     )
     t0 = time.perf_counter()
     label = ("camera" if camera else "no-camera") + ("-max" if speed is None else f"-x{speed:g}")
@@ -64,7 +68,7 @@ def hover_run(
         "sim_world.px4_bridge", config, workdir / f"px4_sim_{label}.log", READY_PREFIX
     ) as sim:
         lockstep_wall_s = time.perf_counter() - t0
-        url = f"udpin://127.0.0.1:{config.mavlink_url.rsplit(':', 1)[1]}"
+        url = f"udpin://127.0.0.1:{mavsdk_port}"
         with MavsdkVehicle(MavsdkConfig(url=url, expected_system_id=77, clock="vehicle")) as vehicle:
             safe = SafeVehicle(vehicle)
             safe.connect()
@@ -96,8 +100,9 @@ def hover_run(
     }
 
 
-def run_px4_bench(px4_dir: Path, instance: int = 8, hover_s: float = 30.0) -> dict[str, Any]:
-    with tempfile.TemporaryDirectory(prefix="bench-px4-") as tmp:
+def run_px4_bench(px4_dir: Path, instance: int | str = "auto", hover_s: float = 30.0) -> dict[str, Any]:
+    """The three runs on one PX4 instance (`auto`: one no other run holds) with ports free per run."""
+    with tempfile.TemporaryDirectory(prefix="bench-px4-") as tmp, px4_instance(instance) as instance:
         real_time = hover_run(px4_dir, instance, True, hover_s, Path(tmp), speed=1.0)
         with_camera = hover_run(px4_dir, instance, True, hover_s, Path(tmp), speed=None)
         without = hover_run(px4_dir, instance, False, hover_s, Path(tmp), speed=None)

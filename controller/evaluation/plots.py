@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -11,6 +12,8 @@ matplotlib.use("Agg")  # files only; never a display
 import matplotlib.pyplot as plt
 import numpy as np
 from PIL import Image
+
+from drone_inspect_core.files import write_atomic
 
 
 def plot_curves(history: Sequence[dict[str, float]], path: Path) -> None:
@@ -26,8 +29,7 @@ def plot_curves(history: Sequence[dict[str, float]], path: Path) -> None:
     ax_acc.set(xlabel="epoch", ylabel="rank-1 accuracy", title="accuracy", ylim=(0, 1))
     ax_acc.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    _save(fig, path, dpi=100)
 
 
 def plot_heatmaps(
@@ -59,8 +61,7 @@ def plot_heatmaps(
         ax.set(title=f"{title} accuracy", xlabel="du (px, right +)", ylabel="dv (px, down +)")
         fig.colorbar(im, ax=ax, fraction=0.046)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    _save(fig, path, dpi=100)
 
 
 def plot_gallery(images: Sequence[np.ndarray], captions: Sequence[str], path: Path, cols: int = 6) -> None:
@@ -76,9 +77,21 @@ def plot_gallery(images: Sequence[np.ndarray], captions: Sequence[str], path: Pa
         ax.plot([w / 2], [h / 2], "r+", ms=10)
         ax.set_title(cap, fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=72)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=72)
     plt.close(fig)
     # Camera noise makes photographic PNGs large; a 128-colour palette keeps the gallery small.
-    with Image.open(path) as img:
+    buffer.seek(0)
+    with Image.open(buffer) as img:
         small = img.convert("RGB").quantize(colors=128)
-    small.save(path, optimize=True)
+    out = io.BytesIO()
+    small.save(out, format="png", optimize=True)
+    write_atomic(path, out.getvalue())
+
+
+def _save(fig: plt.Figure, path: Path, dpi: int) -> None:
+    """The figure as a PNG, whole or not at all (`write_atomic`), and closed."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=dpi)
+    plt.close(fig)
+    write_atomic(path, buffer.getvalue())

@@ -15,6 +15,7 @@ from controller.evaluation.plots import plot_gallery, plot_heatmaps
 from controller.planning.actions import Action
 from controller.training.config import PRESET_NOTES, PRESETS
 from controller.training.data import load_index, read_image
+from drone_inspect_core.files import write_atomic
 
 # paper.tex Table 2: (vision generalisation, vision + text generalisation), mean ± std over 5 seeds.
 PAPER_TABLE2: dict[str, tuple[str, str]] = {
@@ -241,6 +242,6 @@ def write_report(
             f"{100 * r['heldout']['rank1']:.2f} | {r['train_seconds']:.0f} |"
         )
     path = out_dir / "report.md"
-    path.write_text("\n".join(lines) + "\n")
+    write_atomic(path, "\n".join(lines) + "\n")
     assert all(r["experiment"] in BY_NAME for r in results)
     return path

@@ -19,6 +19,7 @@ from tqdm import tqdm
 
 from controller.evaluation.experiments import BY_NAME, EXPERIMENT_SETS, Experiment
 from controller.training.config import run_configs
+from drone_inspect_core.files import set_aside, write_json_atomic
 from drone_inspect_core.parallel import gather, task_executor
 
 log = logging.getLogger(__name__)
@@ -57,6 +58,8 @@ def run_job(job: Job) -> dict[str, Any]:
         epochs=job.epochs,
         threads=job.threads,
     )
+    if (kept := set_aside(job.run_dir)) is not None:  # an interrupted run: kept, and trained afresh
+        log.warning("%s was not finished: kept as %s, training it again", job.run_dir, kept)
     result = train(job.data_dir, job.run_dir, cfg.model, cfg.train, progress=False)
     ckpt = load_checkpoint(job.run_dir)
     index = load_index(job.data_dir)
@@ -73,7 +76,7 @@ def run_job(job: Job) -> dict[str, Any]:
     for setting in ("train", "heldout"):
         ev = evaluate_loaded(ckpt, test, setting, seed=job.seed)
         summary[setting] = ev.__dict__
-    done.write_text(json.dumps(summary) + "\n")
+    write_json_atomic(done, summary, indent=None)
     return summary
 
 

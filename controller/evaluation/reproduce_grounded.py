@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from controller.training.config import run_configs
+from drone_inspect_core.files import set_aside, write_json_atomic
 
 log = logging.getLogger(__name__)
 EVAL_FILE = "eval.json"
@@ -85,6 +86,8 @@ def run_grounded_job(job: GroundedJob) -> dict[str, Any]:
             threads=job.threads,
             model_overrides=dict(job.model_overrides),
         )
+        if (kept := set_aside(job.run_dir)) is not None:  # an interrupted run: kept, and trained afresh
+            log.warning("%s was not finished: kept as %s, training it again", job.run_dir, kept)
         train(list(job.train_dirs), job.run_dir, cfg.model, cfg.train, progress=False)
     metrics = json.loads(metrics_path.read_text())
     summary: dict[str, Any] = {
@@ -108,7 +111,7 @@ def run_grounded_job(job: GroundedJob) -> dict[str, Any]:
                 "auroc": None if ev.presence is None else ev.presence.get("auroc"),
                 "twins": twins,
             }
-    done.write_text(json.dumps(summary) + "\n")
+    write_json_atomic(done, summary, indent=None)
     return summary
 
 
@@ -174,7 +177,7 @@ def reproduce_grounded(
         raise ReproduceTaskError("every run failed: " + "; ".join(failed))
     out_dir.mkdir(parents=True, exist_ok=True)
     table = summarise(results)
-    (out_dir / SUMMARY_FILE).write_text(json.dumps({"seeds": results, "summary": table}, indent=2) + "\n")
+    write_json_atomic(out_dir / SUMMARY_FILE, {"seeds": results, "summary": table})
     report = out_dir / REPORT_FILE
     report.write_text(render_report(table, results, train_dirs, named_tests))
     print(render_report(table, results, train_dirs, named_tests))

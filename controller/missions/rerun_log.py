@@ -14,7 +14,10 @@ vehicle's clock: simulated seconds in a simulator) and `step`:
   and `world/drone`: where it is now.
 
 A recording that fails (disk full, a bad value) logs the error and stops recording; it never
-aborts the flight or costs the report.
+aborts the flight or costs the report. The recording is kept in memory and written whole when the
+flight ends (`drone_inspect_core.files.write_new`): Rerun's own file sink writes from a thread of its
+own and a full disk there cut the file silently, left looking whole. A file that cannot be written is
+said in the report; none is left half-written.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from typing import Any
 
 from controller.planning.actions import ALL_ACTIONS
 from controller.planning.loop_records import StepRecord
+from drone_inspect_core.files import write_new
 
 log = logging.getLogger(__name__)
 
@@ -70,7 +74,7 @@ class RerunRecorder:
         self._track: list[list[float]] = []
         self._failed = False
         self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{header.get('mission', 'mission')}")
-        self.rec.save(str(self.path))
+        self._stream = self.rec.binary_stream()
         self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         lines = [f"**{key}**: {header.get(key)}" for key in ("mission", "planner", "instruction", "vehicle")]
         lines.append(f"**ε**: {epsilon_px:g} px")
@@ -141,12 +145,16 @@ class RerunRecorder:
         self.rec.log("world/drone", rr.Points3D([point], radii=0.05, colors=[(255, 80, 80)]))
 
     def finish(self, outcome: str, message: str) -> None:
-        """The outcome as a last text log; flush and close the file (also after a failure)."""
+        """The outcome as a last text log, then the whole recording written to its file (also after a
+        failure, what was recorded until then); raises OSError when the file cannot be written."""
         try:
             if not self._failed:
                 self.rec.log("planner/action", self._rr.TextLog(f"{outcome}: {message}", level="INFO"))
-            self.rec.flush()
         except Exception:
-            log.exception("rerun recording %s: could not write the end", self.path)
+            log.exception("rerun recording %s: could not record the end", self.path)
         finally:
             self.rec.disconnect()
+        data = self._stream.read()
+        if not data:
+            raise OSError(f"{self.path}: the recording holds nothing")
+        write_new(self.path, data)

@@ -48,6 +48,7 @@ from controller.planning.loop_records import (
     count_second_choices,
 )
 from drone_inspect_core.centring import default_epsilon_px
+from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.vocabulary import Vocabulary
 from flight.moves import take_off_to_start
 from flight.safe_vehicle import SafeVehicle
@@ -293,9 +294,21 @@ def _finish(
 
 @contextmanager
 def open_kit(
-    mission: Mission, out_dir: Path, limits: SafetyLimits | None = None, models: LoadedModels | None = None
+    mission: Mission,
+    out_dir: Path,
+    limits: SafetyLimits | None = None,
+    models: LoadedModels | None = None,
+    signing_key: SigningKey | None = None,
 ) -> Iterator[FlightKit]:
-    """The mission's components, closed (vehicle, camera, sim subprocess) when the block ends."""
+    """The mission's components, closed (vehicle, camera, sim subprocess) when the block ends.
+
+    `signing_key`: a real vehicle's MAVLink signing key; a vehicle the run starts gets its own (the
+    sim-vehicle), or has none (PX4 v1.15), so a key given for one is refused."""
+    if signing_key is not None and not mission.is_real:
+        raise ValueError(
+            f"a signing key is for a real vehicle set up with it; {mission.vehicle} gets a key of its own "
+            "per run (sim-mavlink) or cannot sign (px4-sitl: PX4 v1.15 has no signing)"
+        )
     with ExitStack() as stack:
         if mission.vehicle == SIM:
             from controller.missions.kits.sim import open_sim_kit
@@ -304,11 +317,11 @@ def open_kit(
         elif mission.vehicle == SIM_MAVLINK:
             from controller.missions.kits.sim_mavlink import open_sim_mavlink_kit
 
-            yield stack.enter_context(open_sim_mavlink_kit(mission, out_dir, models))
+            yield stack.enter_context(open_sim_mavlink_kit(mission, out_dir, models, limits))
         elif mission.vehicle == PX4_SITL:
             from controller.missions.kits.px4_sitl import open_px4_sitl_kit
 
-            yield stack.enter_context(open_px4_sitl_kit(mission, out_dir, models))
+            yield stack.enter_context(open_px4_sitl_kit(mission, out_dir, models, limits))
         elif mission.vehicle == ARDUPILOT_SITL:
             from controller.missions.kits.ardupilot_sitl import open_ardupilot_sitl_kit
 
@@ -316,7 +329,7 @@ def open_kit(
         else:
             from controller.missions.kits.real import open_real_kit
 
-            yield stack.enter_context(open_real_kit(mission, out_dir, models))
+            yield stack.enter_context(open_real_kit(mission, out_dir, models, signing_key))
 
 
 def run_mission(
@@ -327,6 +340,7 @@ def run_mission(
     models: LoadedModels | None = None,
     rerun_path: str | Path | None = None,
     claimed: bool = False,
+    signing_key: SigningKey | None = None,
 ) -> MissionResult:
     """Build the mission's kit, fly it and write the report folder `out_dir` (`media`: plot and GIF too).
 
@@ -334,7 +348,7 @@ def run_mission(
     (`drone_inspect_core.files.OutputDirError`; `claimed`: the caller already claimed it). A mission that
     cannot
     start (a bad checkpoint, a camera that does not open, a simulator that fails) still leaves a
-    report saying why, then raises.
+    report saying why, then raises. `signing_key`: a real vehicle's MAVLink signing key (`open_kit`).
     """
     out_dir = Path(out_dir) if claimed else claim_report_dir(out_dir)
     hold_reserve(out_dir)  # room for the outcome, before the flight's .tlog can fill the disk
@@ -343,7 +357,7 @@ def run_mission(
             from controller.missions.rerun_log import check_rerun_path
 
             rerun_path = check_rerun_path(rerun_path)
-        with open_kit(mission, out_dir, limits, models) as kit:
+        with open_kit(mission, out_dir, limits, models, signing_key) as kit:
             return fly_kit(kit, mission, out_dir, limits, media, rerun_path)
     except BaseException as exc:
         if not (out_dir / REPORT_JSON).exists():  # it failed before the flight's own report began

@@ -10,6 +10,7 @@ not a crashed suite.
 
 from __future__ import annotations
 
+import io
 import logging
 import time
 import xml.etree.ElementTree as ET
@@ -29,7 +30,7 @@ from controller.missions.schema import (
     load_mission,
 )
 from controller.planning.loop_records import Outcome
-from drone_inspect_core.files import release_claim
+from drone_inspect_core.files import release_claim, write_atomic
 
 log = logging.getLogger(__name__)
 
@@ -233,4 +234,6 @@ def write_junit(suite: SuiteResult, path: str | Path, name: str = "missions") ->
         )
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
+    buffer = io.BytesIO()
+    ET.ElementTree(root).write(buffer, encoding="utf-8", xml_declaration=True)
+    write_atomic(path, buffer.getvalue())

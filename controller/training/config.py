@@ -47,6 +47,7 @@ checkpoint as the tensor `goal_image_embedding`, used at inference.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any, Literal
 
@@ -110,6 +111,12 @@ class AugmentConfig:
     tint: float = 0.0  # white balance: each channel's gain in [1-tint, 1+tint]
 
     def __post_init__(self) -> None:
+        for name, top in (("brightness", 1.0), ("contrast", 1.0), ("saturation", 1.0), ("hue", 0.5)):
+            value = getattr(self, name)
+            if not 0.0 <= value <= top:
+                raise ValueError(f"{name} must be in [0, {top:g}], got {value}")
+        if not (0.0 <= self.shear_deg <= 45.0 and 0.0 <= self.noise_std <= 1.0):
+            raise ValueError("shear_deg must be in [0, 45] and noise_std in [0, 1]")
         if not 0.0 <= self.translate <= 0.5:
             raise ValueError(f"translate must be in [0, 0.5], got {self.translate}")
         if not 0.0 <= self.scale <= 1.0:
@@ -165,7 +172,10 @@ class TrainConfig:
         if not 0.0 <= self.ema_decay < 1.0:
             raise ValueError(f"ema_decay must be in [0, 1), got {self.ema_decay}")
         if self.epochs < 1 or self.batch_size < 2 or self.goal_sample < 1:
-            raise ValueError("epochs >= 1, batch_size >= 2 and goal_sample >= 1 are required")
+            raise ValueError(
+                "epochs >= 1, batch_size >= 2 and goal_sample >= 1 are required, got "
+                f"epochs {self.epochs}, batch_size {self.batch_size}, goal_sample {self.goal_sample}"
+            )
         if not 0.0 < self.val_fraction < 1.0:
             raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
         if self.instructions not in ("fixed", "varied"):
@@ -174,6 +184,12 @@ class TrainConfig:
             raise ValueError(f"lr_schedule must be constant or cosine, got {self.lr_schedule!r}")
         if self.temperature <= 0:
             raise ValueError("temperature must be > 0")
+        if not (math.isfinite(self.learning_rate) and self.learning_rate > 0):
+            raise ValueError(f"learning_rate must be > 0, got {self.learning_rate}")
+        if self.threads < 1:
+            raise ValueError(f"threads must be >= 1, got {self.threads}")
+        if self.epsilon_px is not None and not (math.isfinite(self.epsilon_px) and self.epsilon_px > 0):
+            raise ValueError(f"epsilon_px must be > 0, got {self.epsilon_px}")
         if self.target_choice not in ("named", "described"):
             raise ValueError(f"target_choice must be named or described, got {self.target_choice!r}")
         if not 0.0 <= self.named_fraction <= 1.0:

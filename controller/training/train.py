@@ -10,7 +10,6 @@ with the stored-goal rule used at inference; the best epoch is saved.
 from __future__ import annotations
 
 import copy
-import json
 import logging
 import math
 import time
@@ -53,6 +52,7 @@ from controller.training.phrasing import all_phrasings
 from controller.training.train_described import goal_ids as _goal_ids
 from controller.training.train_described import model_input, ranking_terms
 from controller.training.train_described import step_described as _step_described
+from drone_inspect_core.files import claimed_dir, write_json_atomic
 
 log = logging.getLogger(__name__)
 METRICS_FILE = "metrics.json"
@@ -119,22 +119,38 @@ def train(
     from a CPU copy, the same format as ever.
     """
     dev = resolve_device(device)
-    torch.set_num_threads(cfg.threads)
-    torch.manual_seed(cfg.seed)
-    gen = torch.Generator().manual_seed(cfg.seed)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-
     data_dirs = [Path(data_dir)] if isinstance(data_dir, str | Path) else [Path(d) for d in data_dir]
     if not data_dirs:
         raise TrainingDataError("no dataset folder to train on")
-    data_dir = data_dirs[0]
+    index = _merged_index(data_dirs)  # a bad dataset is said before the run folder exists
+    # The run folder must be new or empty, and a run that fails before writing leaves none behind.
+    with claimed_dir(out_dir, "run folder") as claimed:
+        return _fit(index, data_dirs[0], claimed, model_cfg, cfg, progress, dev)
+
+
+def _fit(
+    index: DatasetIndex,
+    data_dir: Path,
+    out_dir: Path,
+    model_cfg: ModelConfig,
+    cfg: TrainConfig,
+    progress: bool,
+    dev: torch.device,
+) -> TrainResult:
+    """`train` once the data is indexed and the run folder claimed."""
+    torch.set_num_threads(cfg.threads)
+    torch.manual_seed(cfg.seed)
+    gen = torch.Generator().manual_seed(cfg.seed)
     described = cfg.target_choice == "described"
     if described and model_cfg.conditioning == "none" and not model_cfg.presence_head:
         log.warning("target_choice 'described' without FiLM or a presence head: the words reach z_s only")
-    index = _merged_index(data_dirs)
     eps = index.default_epsilon_px() if cfg.epsilon_px is None else cfg.epsilon_px
     rows = index.split("train") + (index.split("goal") if cfg.goal_as_samples else [])
+    if len(rows) * (1.0 - cfg.val_fraction) < cfg.batch_size // 4:  # said before minutes of loading
+        raise TrainingDataError(
+            f"{data_dir}: about {int(len(rows) * (1.0 - cfg.val_fraction))} training images for a batch of "
+            f"{cfg.batch_size}; need at least a quarter batch"
+        )
     pool = load_images(rows, model_cfg.image_size, eps, desc="train", progress=progress)
     tr_idx, va_idx = split_train_val(len(pool), cfg.val_fraction, cfg.seed)
     train_set, val_set = pool.subset(tr_idx), pool.subset(va_idx)
@@ -262,7 +278,7 @@ def train(
         **meta,
         "history": history,
     }
-    (out_dir / METRICS_FILE).write_text(json.dumps(metrics, indent=2) + "\n")
+    write_json_atomic(out_dir / METRICS_FILE, metrics)
     plot_curves(history, out_dir / CURVES_FILE)
     log.info("trained in %.0f s; best val rank-1 %.4f at epoch %d", seconds, best_acc, best_epoch)
     return result

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -43,15 +44,18 @@ from flight.errors import (
     VehicleConnectionError,
 )
 from flight.mavsdk.link import MavsdkConfig, TelemetryCache, resend_on_timeout, route_mavsdk_logs
-from flight.types import FlightMode, Telemetry, VelocityBody
+from flight.types import Closable, FlightMode, Telemetry, VelocityBody
 from flight.vehicle import Deadline, Vehicle, wait_for
 
 log = logging.getLogger(__name__)
+
 
 _RETRY_ARM = {ActionResult.COMMAND_DENIED, ActionResult.BUSY, ActionResult.TIMEOUT, ActionResult.FAILED}
 READY_REPORT_EVERY_S = 5.0
 DISARM_RACE_WAIT_S = 3.0
 OFFBOARD_START_ATTEMPTS = 3
+LAST_LAND_ACK_WAIT_S = 0.5
+"""After a lost link: how long the last LAND waits for an ack (MAVSDK keeps resending it meanwhile)."""
 
 
 class MavsdkVehicle(Vehicle):
@@ -59,8 +63,10 @@ class MavsdkVehicle(Vehicle):
 
     realtime = True
 
-    def __init__(self, config: MavsdkConfig | None = None) -> None:
+    def __init__(self, config: MavsdkConfig | None = None, link: Closable | None = None) -> None:
+        """`link`: what carries the connection and goes with it (a relay in front of MAVSDK), closed last."""
         self.config = config or MavsdkConfig()
+        self._link = link
         self.setpoints_sent = 0
         self._cache = TelemetryCache(self.config.link_timeout_s)
         self._texts_at_offboard = 0  # the STATUSTEXT count when offboard was confirmed
@@ -352,6 +358,26 @@ class MavsdkVehicle(Vehicle):
             raise CommandDeniedError("land()", exc.result.name, self._last_text()) from None
         self._wait(lambda t: not t.in_air, timeout_s or self.config.timeouts.land_s, "land()", "landed state")
 
+    def send_land(self) -> bool:
+        """NAV_LAND through MAVSDK without blocking (MAVSDK resends it until acked or ~2 s pass, for as
+        long as the connection stays open): True if acked within `LAST_LAND_ACK_WAIT_S`."""
+        if self._action is None:
+            return False
+        acked = threading.Event()
+        results: list[ActionResult] = []
+
+        def on_result(result: ActionResult, _user_data: Any) -> None:  # MAVSDK's thread: store only
+            results.append(result)
+            acked.set()
+
+        self._action.land_async(on_result)
+        acked.wait(LAST_LAND_ACK_WAIT_S)
+        if results and results[0] == ActionResult.SUCCESS:
+            return True
+        why = results[0].name if results else f"no answer within {LAST_LAND_ACK_WAIT_S:.1f} s"
+        log.error("last LAND: %s (%s)", why, self._last_text() or "the vehicle said nothing")
+        return False
+
     def disarm(self, timeout_s: float | None = None) -> None:
         action = self._require(self._action, "disarm()")
         if not self.telemetry().armed:
@@ -394,6 +420,11 @@ class MavsdkVehicle(Vehicle):
 
     def close(self) -> None:
         mavsdk, self._mavsdk = self._mavsdk, None
-        self._action = self._offboard = self._telemetry = self._system = None
+        plugins = (self._action, self._offboard, self._telemetry, self._system)  # alive until destroy():
+        self._action = self._offboard = self._telemetry = self._system = None  # a pending callback is theirs
         if mavsdk is not None:
             mavsdk.destroy()
+        del plugins
+        link, self._link = self._link, None
+        if link is not None:
+            link.close()

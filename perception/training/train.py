@@ -29,6 +29,7 @@ from tqdm import tqdm
 
 from drone_inspect_core.centring import default_epsilon_px
 from drone_inspect_core.dataset import DatasetError, load_manifest
+from drone_inspect_core.files import claimed_dir, write_json_atomic
 from perception.detector_model import STRIDE, CentreNet, DetectorConfig
 from perception.errors import DetectorCheckpointError
 from perception.evaluation.evaluate import DetectorMetrics, evaluate_detections, evaluate_on_dataset
@@ -72,7 +73,7 @@ class TrainDetectorConfig:
             raise ValueError(f"crop_px must be a multiple of 32 in [64, input_size], got {self.crop_px}")
         if not 0.0 <= self.val_fraction < 1.0:
             raise ValueError(f"val_fraction must be in [0, 1), got {self.val_fraction}")
-        if self.lr <= 0:
+        if not (math.isfinite(self.lr) and self.lr > 0):
             raise ValueError(f"lr must be > 0, got {self.lr}")
 
 
@@ -206,6 +207,8 @@ def load_training_data(
     and every row of the extra datasets except those of `data_dir`'s test scenes."""
     cfg = config.detector
     _, meta = load_manifest(config.data_dir, check_images=False)
+    for extra in config.extra_dirs:  # every folder checked before minutes of loading
+        load_manifest(extra, check_images=False)
     train_seeds = set(meta.get("train_scene_seeds") or [])
     test_seeds = set(meta.get("test_scene_seeds") or [])
     pool = load_samples(config.data_dir, ("goal", "train"), cfg.kinds, cfg.input_size)
@@ -264,9 +267,8 @@ def train_detector(config: TrainDetectorConfig) -> TrainDetectorResult:
     """Train; save the best epoch by validation loss as soon as it is reached; score it on the test split."""
     start = time.monotonic()
     torch.manual_seed(config.seed)
-    train, val, meta = load_training_data(config)
     model = CentreNet(config.detector)
-    if config.init_dir is not None:
+    if config.init_dir is not None:  # a bad checkpoint is said before the data loads
         start_from = load_model(config.init_dir)
         if start_from.config != config.detector:
             raise DetectorCheckpointError(
@@ -274,6 +276,21 @@ def train_detector(config: TrainDetectorConfig) -> TrainDetectorResult:
             )
         model.load_state_dict(start_from.state_dict())
         log.info("starting from the weights in %s", config.init_dir)
+    # The run folder must be new or empty, and a run that fails before writing leaves none behind.
+    with claimed_dir(config.out_dir, "run folder"):
+        train, val, meta = load_training_data(config)
+        return _fit(config, model, train, val, meta, start)
+
+
+def _fit(
+    config: TrainDetectorConfig,
+    model: CentreNet,
+    train: DetectorSamples,
+    val: DetectorSamples,
+    meta: dict[str, Any],
+    start: float,
+) -> TrainDetectorResult:
+    """`train_detector` once the data is loaded and the run folder claimed."""
     model = model.to(memory_format=torch.channels_last)
     optimiser = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     steps = config.epochs * math.ceil(len(train) / config.batch_size)
@@ -281,7 +298,6 @@ def train_detector(config: TrainDetectorConfig) -> TrainDetectorResult:
         optimiser, max_lr=config.lr, total_steps=steps, pct_start=0.1
     )
     gen = torch.Generator().manual_seed(config.seed)
-    config.out_dir.mkdir(parents=True, exist_ok=True)
     training: dict[str, Any] = {
         "data_dir": str(config.data_dir),
         "extra_dirs": [str(d) for d in config.extra_dirs],
@@ -325,7 +341,7 @@ def train_detector(config: TrainDetectorConfig) -> TrainDetectorResult:
         "val": val_metrics.as_dict() if val_metrics else None,
         "test": test_metrics.as_dict() if test_metrics else None,
     }
-    (config.out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
+    write_json_atomic(config.out_dir / "metrics.json", metrics)
     if val_metrics:
         log.info("val: %s", val_metrics.summary())
     if test_metrics:

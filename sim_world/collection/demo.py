@@ -15,6 +15,7 @@ from pathlib import Path
 
 import cv2
 
+from drone_inspect_core.files import write_atomic
 from drone_inspect_core.frames import enu_to_ned
 from sim_world.world import World, WorldConfig
 
@@ -116,8 +117,10 @@ def _save_frame(world: World, leg: str, out_dir: Path, number: int) -> DemoFrame
     render = world.render(with_seg=False)
     truth = world.target_truth()
     path = out_dir / f"frame_{number:04d}.png"
-    if not cv2.imwrite(str(path), cv2.cvtColor(render.rgb, cv2.COLOR_RGB2BGR)):
-        raise OSError(f"{path}: cv2.imwrite failed")
+    ok, png = cv2.imencode(".png", cv2.cvtColor(render.rgb, cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise OSError(f"{path}: the frame could not be encoded as PNG")
+    write_atomic(path, png.tobytes())  # whole or not at all: a full disk leaves no half frame
     n, e, d = (float(x) for x in enu_to_ned(world.state().position_enu_m))
     return DemoFrame(
         time_s=world.time_s,

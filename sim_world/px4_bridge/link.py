@@ -5,6 +5,11 @@ until something listens, then exchanges MAVLink 2 over the one connection. The
 server here binds at construction (so a port already in use is an error naming
 the port, before PX4 starts), accepts exactly one client, and reads whole MAVLink
 frames from the byte stream.
+
+It takes only its PX4: with `expect_pid` a connection is accepted only when that process
+owns the other end (Linux: the socket's inode, /proc/net/tcp and /proc/PID/fd); any other
+local program that dials in first is closed at once and said once, whatever it sends. Once
+PX4 is connected the listening socket is closed, so nobody else can even connect.
 """
 
 from __future__ import annotations
@@ -12,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import logging
+import os
 import select
 import socket
 import time
@@ -29,6 +35,43 @@ class SimulatorLinkError(OSError):
 
 class Px4DisconnectedError(ConnectionError):
     """PX4 closed the simulator connection (it exited or was killed)."""
+
+
+def connection_owned_by(conn: socket.socket, pid: int) -> bool:
+    """Whether process `pid` owns the other end of the loopback TCP connection `conn` (Linux /proc).
+    False when that cannot be told: a connection we cannot vouch for is not PX4's."""
+    peer, local = conn.getpeername(), conn.getsockname()
+    inode = _tcp_inode(peer, local)
+    if inode is None:
+        return False
+    wanted = f"socket:[{inode}]"
+    try:
+        for fd in os.listdir(f"/proc/{pid}/fd"):
+            with contextlib.suppress(OSError):
+                if os.readlink(f"/proc/{pid}/fd/{fd}") == wanted:
+                    return True
+    except OSError:
+        return False
+    return False
+
+
+def _tcp_inode(local: tuple[str, int], remote: tuple[str, int]) -> int | None:
+    """The inode of the IPv4 TCP socket bound to `local` and connected to `remote` (/proc/net/tcp)."""
+
+    def hexed(address: tuple[str, int]) -> str:
+        packed = socket.inet_aton(address[0])
+        return f"{int.from_bytes(packed, 'little'):08X}:{address[1]:04X}"
+
+    want_local, want_remote = hexed(local), hexed(remote)
+    try:
+        with open("/proc/net/tcp") as table:
+            for line in table.readlines()[1:]:
+                fields = line.split()
+                if fields[1] == want_local and fields[2] == want_remote:
+                    return int(fields[9])
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
 
 
 class SimulatorServer:
@@ -51,29 +94,40 @@ class SimulatorServer:
             ) from exc
         self.address = self._listener.getsockname()
         self._conn: socket.socket | None = None
-        self._parser = mavlink.MAVLink(None)
-        self._parser.robust_parsing = True
+        self._pending = b""  # bytes of a frame not yet whole
         self.peer: tuple[str, int] | None = None
         self.bytes_in = 0
         self.bytes_out = 0
         self.bad_frames = 0
+        self.refused = 0
+        """Connections closed at once because another process than PX4 made them."""
 
     @property
     def connected(self) -> bool:
         return self._conn is not None
 
-    def accept(self, timeout_s: float) -> tuple[str, int]:
-        """Wait for PX4 to connect; SimulatorLinkError after `timeout_s`."""
-        ready, _, _ = select.select([self._listener], [], [], max(0.0, timeout_s))
-        if not ready:
-            raise SimulatorLinkError(
-                errno.ETIMEDOUT,
-                f"PX4 did not connect to TCP {self.address[0]}:{self.address[1]} within {timeout_s:.0f} s",
-            )
-        conn, peer = self._listener.accept()
+    def accept(self, timeout_s: float, expect_pid: int | None = None) -> tuple[str, int]:
+        """Wait for PX4 (the process `expect_pid`, when given) to connect; SimulatorLinkError after
+        `timeout_s`. Connections from any other process are closed and counted (`refused`)."""
+        deadline = time.monotonic() + max(0.0, timeout_s)
+        while True:
+            ready, _, _ = select.select([self._listener], [], [], max(0.0, deadline - time.monotonic()))
+            if not ready:
+                where = f"TCP {self.address[0]}:{self.address[1]}"
+                raise SimulatorLinkError(
+                    errno.ETIMEDOUT, f"PX4 did not connect to {where} within {timeout_s:.0f} s"
+                )
+            conn, peer = self._listener.accept()
+            if expect_pid is None or connection_owned_by(conn, expect_pid):
+                break
+            self.refused += 1
+            if self.refused == 1:
+                log.warning("refused a simulator connection from %s:%d: not PX4 (pid %d)", *peer, expect_pid)
+            conn.close()
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         conn.setblocking(False)
         self._conn, self.peer = conn, peer
+        self._listener.close()  # one PX4, and nobody after it
         log.info("PX4 connected from %s:%d", *peer)
         return peer
 
@@ -116,14 +170,39 @@ class SimulatorServer:
             if not data:
                 raise Px4DisconnectedError("PX4 closed the simulator connection")
             self.bytes_in += len(data)
-            for msg in self._parser.parse_buffer(data) or []:
-                if msg.get_type() == "BAD_DATA":
-                    self.bad_frames += 1
-                else:
-                    messages.append(msg)
+            messages += self._frames(data)
             if len(data) < 65536:
                 break
         return messages
+
+    def _frames(self, data: bytes) -> list[mavlink.MAVLink_message]:
+        """The whole, known messages in the stream so far. A frame that fails its checks (or has an id we
+        do not know, which cannot be checked) costs one byte, not the frame's claimed length: pymavlink
+        drops as many bytes as a bad header claims, and so, on a byte stream, the good frames that follow;
+        here the scan starts again one byte on."""
+        pending, out = self._pending + data, []
+        while pending:
+            parser = mavlink.MAVLink(None)
+            parser.robust_parsing = True
+            try:
+                message = parser.parse_char(pending)
+            except Exception:  # a parser that chokes: skip the byte it choked on
+                message = mavlink.MAVLink_bad_data(pending[:1], "unparsable")
+                consumed = 1
+            else:
+                consumed = len(pending) - parser.buf_len()
+            if message is None:
+                break  # a frame not yet whole: wait for the rest
+            if isinstance(message, mavlink.MAVLink_unknown | mavlink.MAVLink_bad_data):
+                # (an unknown id cannot be CRC-checked: random bytes pass as one)
+                self.bad_frames += 1
+                bad_prefix = getattr(message, "reason", "") == "Bad prefix"
+                pending = pending[consumed:] if bad_prefix else pending[1:]
+                continue
+            out.append(message)
+            pending = pending[consumed:]
+        self._pending = pending
+        return out
 
     def _require(self) -> socket.socket:
         if self._conn is None:

@@ -14,25 +14,32 @@ Per run, PX4 gets:
 - `px4-rc.params` from a private folder on PATH, the hook PX4's rcS sources after the
   airframe ("user defined params for instances can be in PATH"): the per-run system id
   (so a client can tell this PX4 from any other) and the run's parameter overrides;
+- with `Px4Ports` (what missions do), `px4-rc.simulator` and `px4-rc.mavlink` from that folder
+  too, the hooks rcS sources the same way: PX4 dials its simulator on our TCP port and runs ONE
+  MAVLink link, the offboard/API one, on our UDP port, sending to ours. PX4's ground-station
+  (18570+N), payload (14280+N) and gimbal (13030+N) links are not started at all, and every port
+  is free per run. What remains: PX4 v1.15's MAVLink binds INADDR_ANY (mavlink_main.cpp,
+  `init_udp`; it has no bind-address option, nor signing), so its one UDP port can be reached from
+  the network, and PX4 obeys whatever reaches it. The relay in front of MAVSDK is the guard on our
+  side; firewall that port (or use a network namespace) where the network is not trusted;
 - a parent-death signal: PX4 gets SIGTERM when the process that started it dies, however
   it dies (SIGKILL included), so no PX4 outlives its simulator.
 """
 
 from __future__ import annotations
 
-import fcntl
 import logging
+import math
 import os
 import shutil
 import signal
 import subprocess
 import tempfile
 from collections.abc import Mapping
-from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from sim_world.sitl.children import InstanceBusyError, find_sitl_dir, instance_lock, set_parent_death_signal
+from sim_world.sitl.children import find_sitl_dir, set_parent_death_signal
 
 log = logging.getLogger(__name__)
 
@@ -108,6 +115,33 @@ def speed_scaled_timeouts(speed_factor: float | None) -> dict[str, float]:
     return {name: round(value * speed_factor, 3) for name, value in LINK_LOSS_TIMEOUTS_S.items()}
 
 
+def check_px4_params(params: Mapping[str, float]) -> None:
+    """ValueError naming the first parameter that is not a PX4 name (upper case, digits, `_`, at most 16
+    characters: what `param set` takes) or whose value is not a finite number."""
+    for name, value in params.items():
+        if not name.replace("_", "").isalnum() or not name.isupper() or len(name) > 16:
+            raise ValueError(f"PX4 parameter name {name!r} is not valid (upper case, at most 16 characters)")
+        if not math.isfinite(float(value)):
+            raise ValueError(f"PX4 parameter {name}: {value!r} is not a finite number")
+
+
+@dataclass(frozen=True)
+class Px4Ports:
+    """PX4's ports when a run chooses them (free per run) instead of PX4's per-instance convention."""
+
+    simulator_tcp: int
+    """Where PX4 dials its simulator (the bridge listens there)."""
+    mavlink_udp: int
+    """PX4's one MAVLink link (offboard/API) listens here, on every interface (PX4 cannot bind one)."""
+    mavlink_remote_udp: int
+    """Where that link sends: 127.0.0.1 on this port (the relay in front of MAVSDK)."""
+
+    def __post_init__(self) -> None:
+        for name in ("simulator_tcp", "mavlink_udp", "mavlink_remote_udp"):
+            if not 1 <= getattr(self, name) <= 65535:
+                raise ValueError(f"Px4Ports.{name} must be a port, got {getattr(self, name)}")
+
+
 @dataclass(frozen=True)
 class Px4Options:
     """One PX4 SITL run."""
@@ -119,16 +153,14 @@ class Px4Options:
     speed_factor: float | None = None  # faster than real time: PX4's link-loss timeouts are stretched by it
     keep_logs_in: Path | None = None  # copy PX4's .ulg logs here when it stops
     console_log: Path | None = None  # PX4's console output (default: inside the working folder)
+    ports: Px4Ports | None = None  # None: PX4's own per-instance ports (4560+N, 14580+N -> 14540+N, ...)
 
     def __post_init__(self) -> None:
         if not 0 <= self.instance <= MAX_INSTANCE:
             raise ValueError(f"PX4 instance must be 0..{MAX_INSTANCE}, got {self.instance}")
         if self.system_id is not None and not 1 <= self.system_id <= 254:
             raise ValueError(f"system_id must be 1..254, got {self.system_id}")
-        for name, value in self.params.items():
-            if not name.replace("_", "").isalnum() or not name.isupper() or len(name) > 16:
-                raise ValueError(f"PX4 parameter name {name!r} is not valid")
-            float(value)
+        check_px4_params(self.params)
 
 
 class Px4Process:
@@ -153,6 +185,9 @@ class Px4Process:
                 (links / name).symlink_to(px4 / "bin" / "px4")
         (links / "px4-alias.sh").symlink_to(px4 / "bin" / "px4-alias.sh")
         (links / "px4-rc.params").write_text(self._params_script())
+        if opts.ports is not None:
+            (links / "px4-rc.simulator").write_text(_simulator_script(opts.ports))
+            (links / "px4-rc.mavlink").write_text(_mavlink_script(opts.ports))
         run_dir = self.workdir / "run"
         run_dir.mkdir()
         env = {k: v for k, v in os.environ.items() if not k.startswith(("PX4_", "ROS_"))}
@@ -254,24 +289,29 @@ class Px4Process:
         self.close()
 
 
-class Px4InstanceBusyError(InstanceBusyError):
-    """The PX4 instance asked for (or every instance, for `auto`) is held by another run."""
+_OUR_HOOK = "# written by drone-inspect for this run: sourced by PX4's rcS in place of its own {}"
 
 
-def px4_instance(wanted: int | str) -> AbstractContextManager[int]:
-    """Hold a PX4 instance number for the block: a lock file per instance, released on any exit."""
-    return instance_lock("px4", wanted, MAX_INSTANCE, _px4_running, Px4InstanceBusyError)
+def _simulator_script(ports: Px4Ports) -> str:
+    """PX4's own external-simulator branch of px4-rc.simulator, with our TCP port."""
+    lines = [
+        "#!/bin/sh",
+        _OUR_HOOK.format("px4-rc.simulator"),
+        "param set-default IMU_INTEG_RATE 250",
+        "param set-default EKF2_GPS_DELAY 10",
+        "param set-default EKF2_MULTI_IMU 3",
+        "param set-default SENS_IMU_MODE 0",
+        f"simulator_mavlink start -c {ports.simulator_tcp}",
+    ]
+    return "\n".join(lines) + "\n"
 
 
-def _px4_running(instance: int) -> bool:
-    """Whether some PX4 (ours or not) holds PX4's own lock for this instance (/tmp/px4_lock-N)."""
-    path = Path(f"/tmp/px4_lock-{instance}")
-    if not path.exists():
-        return False
-    try:
-        with path.open("rb") as handle:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            fcntl.flock(handle, fcntl.LOCK_UN)
-    except OSError:
-        return True
-    return False
+def _mavlink_script(ports: Px4Ports) -> str:
+    """PX4's offboard/API link alone (as px4-rc.mavlink starts it), on our ports; no other link."""
+    local, remote = ports.mavlink_udp, ports.mavlink_remote_udp
+    lines = [
+        "#!/bin/sh",
+        _OUR_HOOK.format("px4-rc.mavlink"),
+        f"mavlink start -x -u {local} -r 4000000 -f -m onboard -o {remote}",
+    ]
+    return "\n".join(lines) + "\n"

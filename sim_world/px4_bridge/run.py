@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
+from drone_inspect_core.ports import free_port
 from drone_inspect_core.world_options import CameraFaults, StartPose, WindConfig
 from sim_world.process_entry import say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
@@ -28,7 +29,14 @@ from sim_world.px4_bridge.link import (
     SimulatorLinkError,
     SimulatorServer,
 )
-from sim_world.px4_bridge.px4_process import MAX_INSTANCE, Px4Options, Px4Process, Px4StartError
+from sim_world.px4_bridge.px4_process import (
+    MAX_INSTANCE,
+    Px4Options,
+    Px4Ports,
+    Px4Process,
+    Px4StartError,
+    check_px4_params,
+)
 from sim_world.px4_bridge.sensors import SensorNoise, SensorSuite
 from sim_world.rendering.video import VideoConfig, VideoError, WorldVideoFeed
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfig
@@ -73,10 +81,19 @@ class Px4SimConfig:
     video_faults: CameraFaults | None = None
     px4_dies_at_s: float | None = None
     """An injected fault: PX4 is killed (SIGKILL) at this simulated time."""
+    mavlink_remote_port: int | None = None
+    """Where PX4's MAVLink link sends (127.0.0.1); None: PX4's own ports for the instance (4560+N,
+    14580+N -> 14540+N, ...). Given (a mission: the relay's port), every PX4 port is free per run and
+    PX4 runs only that one link (`px4_process.Px4Ports`)."""
 
     def __post_init__(self) -> None:
         if not 0 <= self.instance <= MAX_INSTANCE:
             raise ValueError(f"PX4 instance must be 0..{MAX_INSTANCE}, got {self.instance}")
+        check_px4_params(self.params)
+        for name in ("video_port", "mavlink_remote_port"):
+            port = getattr(self, name)
+            if port is not None and not 0 <= port <= 65535:
+                raise ValueError(f"{name} must be a port (0..65535), got {port}")
         if not 32 <= self.image_size_px <= 1024:
             raise ValueError(f"image_size_px must be in [32, 1024], got {self.image_size_px}")
         if self.system_id is not None and not 1 <= self.system_id <= 254:
@@ -85,13 +102,24 @@ class Px4SimConfig:
             raise ValueError(f"duration_s must be > 0, got {self.duration_s}")
 
     @property
+    def free_ports(self) -> bool:
+        """Whether PX4's ports are chosen free for this run (see `mavlink_remote_port`)."""
+        return self.mavlink_remote_port is not None
+
+    @property
     def simulator_port(self) -> int:
-        return SIMULATOR_BASE_PORT + self.instance
+        """The TCP port the bridge listens on for PX4 (0: any free one)."""
+        return 0 if self.free_ports else SIMULATOR_BASE_PORT + self.instance
 
     @property
     def mavlink_url(self) -> str:
-        """Where a MAVSDK client listens for this PX4 (PX4 sends to 127.0.0.1:14540+N)."""
-        return f"udpin://0.0.0.0:{OFFBOARD_PORT_BASE + self.instance}"
+        """Where a MAVSDK client (or the relay) listens for this PX4 (PX4 sends to 127.0.0.1 there)."""
+        port = (
+            self.mavlink_remote_port
+            if self.mavlink_remote_port is not None
+            else OFFBOARD_PORT_BASE + self.instance
+        )
+        return f"udpin://0.0.0.0:{port}"
 
     @property
     def http_video_port(self) -> int:
@@ -108,6 +136,10 @@ class Px4SimReady:
     truth_url: str | None
     px4_pid: int | None
     lockstep_after_s: float
+    simulator_tcp: int = 0
+    """The bridge's TCP port PX4 dialled."""
+    px4_mavlink_udp: int | None = None
+    """PX4's one MAVLink port (bound on every interface), where the run chose it."""
 
 
 def build_px4_world(config: Px4SimConfig) -> World:
@@ -158,6 +190,7 @@ def run_px4_sim(
                     keep_logs_in=config.px4_log_dir,
                     speed_factor=MAX_SPEED_FACTOR if config.timing.speed is None else config.timing.speed,
                     console_log=None if config.px4_log_dir is None else config.px4_log_dir / "px4.log",
+                    ports=_px4_ports(config, server),
                 )
                 with Px4Process(options) as px4:
                     _accept(server, px4, config.connect_timeout_s)
@@ -184,6 +217,8 @@ def run_px4_sim(
                                 truth_url=None if video is None else video.truth_url,
                                 px4_pid=px4.pid,
                                 lockstep_after_s=world.time_s,
+                                simulator_tcp=server.address[1],
+                                px4_mavlink_udp=None if options.ports is None else options.ports.mavlink_udp,
                             )
                         )
                     if config.px4_dies_at_s is not None:
@@ -202,13 +237,21 @@ def run_px4_sim(
                     video.close()
 
 
+def _px4_ports(config: Px4SimConfig, server: SimulatorServer) -> Px4Ports | None:
+    """PX4's ports for a run that chooses them: the bridge's (already bound) and a free UDP port for its
+    link, checked on every interface, where PX4 binds it."""
+    if config.mavlink_remote_port is None:
+        return None
+    return Px4Ports(server.address[1], free_port("udp", "0.0.0.0"), config.mavlink_remote_port)
+
+
 def _accept(server: SimulatorServer, px4: Px4Process, timeout_s: float) -> None:
     """Wait for PX4 to dial in, failing at once (with its console) if it exits instead."""
     deadline = time.monotonic() + timeout_s
     while True:
         px4.check_alive()
         try:
-            server.accept(min(0.5, max(0.0, deadline - time.monotonic())))
+            server.accept(min(0.5, max(0.0, deadline - time.monotonic())), expect_pid=px4.pid)
             return
         except SimulatorLinkError:
             if time.monotonic() >= deadline:

@@ -26,6 +26,9 @@ do (../shared/MAVLINK_NOTES.md):
 - after a disarm the mode reverts to the last mode the client asked for with
   DO_SET_MODE (NAV_LAND and failsafes do not change it: after OFFBOARD → land the
   vehicle is back in OFFBOARD and the next arm is denied, as on PX4).
+
+The vehicle's own limits (speeds, a fence: `sim_world.vehicle.limits`) hold whatever a client
+asks; a takeoff above the fence's ceiling is denied.
 """
 
 from __future__ import annotations
@@ -39,8 +42,10 @@ from enum import Enum
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from drone_inspect_core.frames import wrap_rad
+from drone_inspect_core.frames import heading_to_world_ned, wrap_rad
+from drone_inspect_core.vehicle_limits import VehicleLimits
 from sim_world.vehicle import px4_modes as modes
+from sim_world.vehicle.limits import fenced_velocity, speed_limits
 from sim_world.vehicle.model import ModelRefused, VehicleModel
 from sim_world.vehicle.params import ParameterStore
 from sim_world.vehicle.px4_modes import Px4MainMode, Px4Mode
@@ -69,8 +74,9 @@ class CommanderConfig:
     initial_mode: Px4Mode = modes.AUTO_LOITER
 
     def __post_init__(self) -> None:
-        if self.arming_boot_delay_s < 0 or self.offboard_stream_max_age_s <= 0:
-            raise ValueError(f"CommanderConfig: delays must be positive: {self}")
+        delay, age = self.arming_boot_delay_s, self.offboard_stream_max_age_s
+        if not (delay >= 0 and age > 0):
+            raise ValueError(f"CommanderConfig: arming delay must be >= 0 ({delay}), stream age > 0 ({age})")
 
 
 class FailsafeStage(Enum):
@@ -88,9 +94,13 @@ class Commander:
         params: ParameterStore,
         config: CommanderConfig | None = None,
         client_clock: Callable[[], float] | None = None,
+        limits: VehicleLimits | None = None,
     ):
         self._model = model
         self._client_clock = client_clock
+        self.limits = limits or VehicleLimits()
+        self.fence_stops = 0
+        """Loop turns in which the fence dropped part of a setpoint."""
         self._params = params
         self.config = config or CommanderConfig()
         self.texts: deque[tuple[int, str]] = deque(maxlen=64)  # (MAV_SEVERITY, text) to send
@@ -221,6 +231,11 @@ class Commander:
         if not math.isfinite(altitude) or altitude < 0.5:
             self.say(mavlink.MAV_SEVERITY_CRITICAL, f"Takeoff denied: altitude {altitude:.2f} m too low")
             return DENIED
+        ceiling = self.limits.fence_max_altitude_m
+        if ceiling is not None and altitude > ceiling:
+            text = f"Takeoff denied: {altitude:.1f} m above the fence's {ceiling:g} m"
+            self.say(mavlink.MAV_SEVERITY_CRITICAL, text)
+            return DENIED
         try:
             self._model.takeoff(altitude)
         except ModelRefused as exc:
@@ -258,8 +273,8 @@ class Commander:
             sp = self._setpoint
             if sp is None or self.setpoint_age_s() > self._params.get("COM_OF_LOSS_T"):
                 self._trigger_failsafe(now)
-            elif sp.yaw_deg is not None:
-                self._apply_setpoint()
+            elif sp.yaw_deg is not None or self.limits.has_fence:
+                self._apply_setpoint()  # a heading to turn to, or a fence to keep: re-checked every turn
         hold_s = self._params.get("COM_FAIL_ACT_T")
         if self.failsafe is FailsafeStage.HOLD and now - self._failsafe_since_s >= hold_s:
             self.failsafe = FailsafeStage.ACTION
@@ -322,26 +337,36 @@ class Commander:
     def _apply_setpoint(self) -> None:
         if self._setpoint is None:
             return
-        p = self._params
-        sp = self._setpoint.limited(
-            p.get("MPC_XY_VEL_MAX"),
-            p.get("MPC_Z_VEL_MAX_UP"),
-            p.get("MPC_Z_VEL_MAX_DN"),
-            p.get("MPC_YAWRAUTO_MAX"),
-        )
+        limits = speed_limits(self._params, self.limits)
+        yaw_limit = limits[3]
+        sp = self._setpoint.limited(*limits)
+        kinematics = self._model.kinematics()
         yawspeed = sp.yawspeed_deg_s
         if sp.yaw_deg is not None:
-            error_rad = wrap_rad(math.radians(sp.yaw_deg) - self._model.kinematics().yaw_rad)
-            limit = p.get("MPC_YAWRAUTO_MAX")
-            yawspeed = min(max(math.degrees(_YAW_GAIN_PER_S * error_rad), -limit), limit)
+            error_rad = wrap_rad(math.radians(sp.yaw_deg) - kinematics.yaw_rad)
+            yawspeed = min(max(math.degrees(_YAW_GAIN_PER_S * error_rad), -yaw_limit), yaw_limit)
         a, b, down = sp.velocity_m_s
+        body = sp.frame is SetpointFrame.BODY_NED
         try:
-            if sp.frame is SetpointFrame.BODY_NED:
+            fenced = self._fence(*(heading_to_world_ned(a, b, kinematics.yaw_rad) if body else (a, b)), down)
+            if fenced is not None:
+                self._model.set_velocity_ned(*fenced, yawspeed)
+            elif body:
                 self._model.set_velocity_body(a, b, down, yawspeed)
             else:
                 self._model.set_velocity_ned(a, b, down, yawspeed)
         except ModelRefused as exc:
             log.warning("setpoint not flown: %s", exc)
+
+    def _fence(self, north: float, east: float, down: float) -> tuple[float, float, float] | None:
+        """`fenced_velocity` of the vehicle's limits here; said once when it first stops something."""
+        fenced = fenced_velocity(self.limits, self._model.kinematics().position_ned_m, (north, east, down))
+        if fenced is None:
+            return None
+        if self.fence_stops == 0:
+            self.say(mavlink.MAV_SEVERITY_WARNING, "Geofence: motion towards the fence stopped")
+        self.fence_stops += 1
+        return fenced
 
     def _trigger_failsafe(self, now: float) -> None:
         self.failsafe = FailsafeStage.HOLD

@@ -10,8 +10,13 @@ system id is 1 + N, as PX4 SITL's MAV_SYS_ID for instance N.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Annotated
 
+from pydantic import Field
+
+from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.sim_speed import MAX_SPEED, SimSpeed, parse_sim_speed
+from drone_inspect_core.vehicle_limits import VehicleLimits
 from sim_world.vehicle.battery import BatteryConfig
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.telemetry import HomePoint
@@ -48,6 +53,10 @@ class SimVehicleConfig:
     lockstep_lead_s: float = 0.1  # speed "max" in OFFBOARD: simulated lead over the last setpoint
     lockstep_silence_s: float = 0.25  # ... until the setpoint stream is this silent (wall)
     max_telemetry_hz: float = 250.0  # faster than real time: the cap on the sped-up clock streams
+    limits: VehicleLimits = field(default_factory=VehicleLimits)
+    """What the vehicle holds whatever a client asks (speeds, a fence): see `Commander`."""
+    signing_key: Annotated[SigningKey | None, Field(exclude=True)] = None
+    """MAVLink 2 signing: sign everything sent, obey only what is signed with this key (None: off)."""
 
     def __post_init__(self) -> None:
         if not 0 <= self.instance <= 99:

@@ -4,6 +4,11 @@ Only parameters that change the vehicle's behaviour are served; they keep PX4's
 names, units and defaults (one exception: COM_OBL_RC_ACT defaults to Land, see
 `PX4_PARAMS`). PX4 encodes integer parameters "bytewise": the int32's bits are
 packed into PARAM_VALUE's float field, and PARAM_SET arrives the same way.
+
+The speed limits' ranges end at the vehicle's own limits (`VehicleLimits`, set by whoever
+started it): a client can lower MPC_XY_VEL_MAX, never raise it past them, and 0 stops.
+Values live in memory only: every vehicle starts from these defaults and its boot
+overrides, so nothing a client set outlives the run.
 """
 
 from __future__ import annotations
@@ -12,9 +17,11 @@ import logging
 import math
 import struct
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from pymavlink.dialects.v20 import common as mavlink
+
+from drone_inspect_core.vehicle_limits import VehicleLimits
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +70,25 @@ PX4_PARAMS: tuple[ParamSpec, ...] = (
 )
 
 _SUPPORTED_OBL_ACTIONS = (0, 1, 4, 5)
+_LIMIT_FIELDS = {
+    "MPC_XY_VEL_MAX": "max_horizontal_speed_m_s",
+    "MPC_Z_VEL_MAX_UP": "max_up_m_s",
+    "MPC_Z_VEL_MAX_DN": "max_down_m_s",
+    "MPC_YAWRAUTO_MAX": "max_yaw_rate_deg_s",
+    "MIS_TAKEOFF_ALT": "fence_max_altitude_m",
+}
+
+
+def limited_specs(limits: VehicleLimits, specs: Iterable[ParamSpec] = PX4_PARAMS) -> tuple[ParamSpec, ...]:
+    """`specs` with their ranges (and defaults) ending at the vehicle's own `limits`."""
+    out = []
+    for spec in specs:
+        limit = getattr(limits, _LIMIT_FIELDS.get(spec.name, ""), None)
+        if limit is not None:
+            top = max(min(spec.maximum, float(limit)), spec.minimum)
+            spec = replace(spec, maximum=top, default=min(spec.default, top))
+        out.append(spec)
+    return tuple(out)
 
 
 def encode_param_value(spec: ParamSpec, value: float) -> float:
@@ -102,6 +128,11 @@ class ParameterStore:
         self._values: dict[str, float] = {s.name: float(s.default) for s in self._specs.values()}
         for name, value in (overrides or {}).items():
             self.set(name, value)
+        self._boot = dict(self._values)
+
+    def changed(self) -> dict[str, float]:
+        """The parameters set to something else since boot (over MAVLink), with their values now."""
+        return {name: value for name, value in self._values.items() if value != self._boot[name]}
 
     def __len__(self) -> int:
         return len(self._names)
@@ -174,3 +205,10 @@ def parse_param_overrides(items: Iterable[str]) -> dict[str, float]:
         except ValueError:
             raise ParamError(f"parameter override {item!r}: {text!r} is not a number") from None
     return out
+
+
+def checked_overrides(overrides: Mapping[str, float]) -> dict[str, float]:
+    """`overrides` if every one names a parameter the vehicle serves with a value in its range (checked
+    now, before anything starts), else ParamError naming the first that does not."""
+    ParameterStore(overrides=overrides)
+    return dict(overrides)

@@ -12,11 +12,14 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import sys
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any, TextIO
 
+from drone_inspect_core.config_files import from_json
+from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.world_options import CameraFaults, StartPose, WindConfig
 from sim_world.process_entry import say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
@@ -49,6 +52,14 @@ class SimVehicleRun:
     video_faults: CameraFaults | None = None
     dies_at_s: float | None = None
     """An injected fault: the vehicle process kills itself (SIGKILL) at this simulated time."""
+
+    def __post_init__(self) -> None:
+        if self.duration_s is not None and not self.duration_s > 0:
+            raise ValueError(f"duration_s must be > 0 (or none: until stopped), got {self.duration_s}")
+        if not 32 <= self.image_size_px <= 1024:
+            raise ValueError(f"image_size_px must be in [32, 1024], got {self.image_size_px}")
+        if not self.status_every_s >= 0:
+            raise ValueError(f"status_every_s must be >= 0, got {self.status_every_s}")
 
 
 @dataclass(frozen=True)
@@ -83,10 +94,11 @@ def run_sim_vehicle(
     run: SimVehicleRun,
     stop: threading.Event | None = None,
     on_ready: Callable[[SimVehicle], None] | None = None,
+    on_end: Callable[[SimVehicle], None] | None = None,
 ) -> LoopStats:
     """Serve the world until `stop` is set or `duration_s` passes; returns the loop statistics.
 
-    `on_ready(vehicle)` (a callable) is called once the ports are open.
+    `on_ready(vehicle)` is called once the ports are open, `on_end(vehicle)` before it closes.
     """
     stop = stop or threading.Event()
     world, vehicle_config = build_world(run)
@@ -130,11 +142,29 @@ def run_sim_vehicle(
                         s.mean_render_ms, s.messages_in, s.messages_out,
                     )  # fmt: skip
             stats = vehicle.stats()
+            if on_end is not None:
+                on_end(vehicle)
     return stats
 
 
 # --------------------------------------------------------------------------- serving a process
 READY_PREFIX = "sim-vehicle ready: "
+SUMMARY_PREFIX = "sim-vehicle link: "
+"""The last line of a served vehicle: who its link accepted messages from and what it dropped."""
+
+
+def link_summary(vehicle: SimVehicle) -> dict[str, Any]:
+    """What the vehicle's link let through and kept out, and the parameters changed since boot."""
+    stats = vehicle.stats()
+    return {
+        "signed": vehicle.config.signing_key is not None,
+        "accepted": stats.messages_in,
+        "accepted_from": vehicle.senders(),
+        "dropped_unsigned": stats.messages_unsigned,
+        "dropped_foreign": stats.messages_foreign,
+        "dropped_bad": stats.messages_bad,
+        "params_changed": vehicle.params.changed(),
+    }
 
 
 def serve(
@@ -161,11 +191,13 @@ def serve(
         )
         say_ready(out, READY_PREFIX, info)
 
+    def end(vehicle: SimVehicle) -> None:
+        say_ready(out, SUMMARY_PREFIX, link_summary(vehicle))
+
     try:
-        stats = run_sim_vehicle(run, stop, on_ready=ready)
+        stats = run_sim_vehicle(run, stop, on_ready=ready, on_end=end)
     except (OSError, SimVehicleError, VideoError) as exc:
-        out.write(f"sim-vehicle failed: {exc}\n")
-        out.flush()
+        print(f"sim-vehicle failed: {exc}", file=sys.stderr, flush=True)  # a launcher reads both
         return 1
     out.write(
         f"sim-vehicle: {stats.sim_s:.1f} s simulated in {stats.wall_s:.1f} s "
@@ -173,3 +205,20 @@ def serve(
     )
     out.flush()
     return 0
+
+
+def secret_json(run: SimVehicleRun) -> dict[str, Any]:
+    """What the run's JSON (`config_files.to_json`, also kept beside the run's report) leaves out, for the
+    child's stdin only: the signing key (hex), if any."""
+    key = run.vehicle.signing_key
+    return {} if key is None else {"signing_key": key.hex()}
+
+
+def run_from_json(data: dict[str, Any]) -> SimVehicleRun:
+    """The run from its JSON merged with `secret_json` (validated by the dataclasses and the scene model)."""
+    data = dict(data)
+    key = data.pop("signing_key", None)
+    run = from_json(SimVehicleRun, data)
+    if key is None:
+        return run
+    return replace(run, vehicle=replace(run.vehicle, signing_key=SigningKey.from_text(str(key))))

@@ -32,7 +32,7 @@ from sim_world.vehicle.commands import MessageHandler
 from sim_world.vehicle.config import MAX_SPEED, SimVehicleConfig
 from sim_world.vehicle.link import UdpMavlinkLink
 from sim_world.vehicle.model import VehicleModel
-from sim_world.vehicle.params import ParameterStore
+from sim_world.vehicle.params import ParameterStore, limited_specs
 from sim_world.vehicle.px4_modes import Px4Mode
 from sim_world.vehicle.telemetry import DEFAULT_RATES_HZ, MessageScheduler, TelemetryBuilder, VehicleSnapshot
 
@@ -89,6 +89,9 @@ class LoopStats:
     mean_render_ms: float = 0.0
     messages_in: int = 0
     messages_out: int = 0
+    messages_unsigned: int = 0  # dropped: no, a wrong or a replayed signature (with a signing key)
+    messages_foreign: int = 0  # dropped: from an address that is not the vehicle's controller
+    messages_bad: int = 0  # dropped: not MAVLink (CRC, unknown id, garbage)
 
     @property
     def real_time_factor(self) -> float:
@@ -104,11 +107,12 @@ class SimVehicle:
         self.config = config or SimVehicleConfig()
         self._model = model
         self._video = video
-        self.params = ParameterStore(overrides=self.config.params)
+        self.params = ParameterStore(limited_specs(self.config.limits), overrides=self.config.params)
         # Faster than real time, the client (MAVSDK: setpoints re-sent at 20 Hz of wall time) is timed
         # on the wall clock: the commander's timers that wait on it use that clock too.
         client_clock = time.monotonic if self.config.faster_than_real_time else None
-        self.commander = Commander(model, self.params, self.config.commander, client_clock)
+        cfg = self.config
+        self.commander = Commander(model, self.params, cfg.commander, client_clock, cfg.limits)
         self._battery = BatteryModel(self.config.battery)
         self._builder = TelemetryBuilder(self.config.home, uid=0x5157_0000 + self.config.instance)
         self._boot_s = model.time_s
@@ -137,6 +141,7 @@ class SimVehicle:
             cfg.system_id,
             1,
             adopt_client=cfg.adopt_client,
+            signing_key=cfg.signing_key,
         )
         self._thread = threading.Thread(target=self._run, name=f"sim-vehicle-{cfg.instance}", daemon=True)
         self._thread.start()
@@ -211,6 +216,11 @@ class SimVehicle:
     def mode(self) -> Px4Mode:
         return self._snapshot.mode
 
+    def senders(self) -> dict[str, int]:
+        """Messages accepted (so acted on) per sender, as "system/component": who commanded this vehicle."""
+        link = self._link
+        return {} if link is None else {f"{s}/{c}": n for (s, c), n in sorted(link.senders.items())}
+
     def stats(self) -> LoopStats:
         with self._stats_lock:
             stats = LoopStats(**vars(self._stats))
@@ -284,7 +294,9 @@ class SimVehicle:
                 st.dropped_sim_s += dropped
                 st.wall_s = time.monotonic() - start_wall
                 st.sim_s = model.time_s - sim0
-                st.messages_in, st.messages_out = link.stats.received, link.stats.sent
+                ls = link.stats
+                st.messages_in, st.messages_out = ls.received, ls.sent
+                st.messages_unsigned, st.messages_foreign, st.messages_bad = ls.unsigned, ls.foreign, ls.bad
             # 4. sleep until the next physics step or telemetry is due, or a message arrives
             if flat_out:  # held by the lockstep bound: wait for the client's next setpoint
                 select.select([link], [], [], 0.0 if steps else _MIN_WAIT_S * 4)

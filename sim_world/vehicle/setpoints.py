@@ -45,10 +45,11 @@ class VelocitySetpoint:
     def limited(
         self, max_xy_m_s: float, max_up_m_s: float, max_down_m_s: float, max_yaw_deg_s: float
     ) -> VelocitySetpoint:
-        """The same setpoint with PX4's speed limits (MPC_*_VEL_MAX, MPC_YAWRAUTO_MAX) applied."""
+        """The same setpoint with PX4's speed limits (MPC_*_VEL_MAX, MPC_YAWRAUTO_MAX) applied; a limit
+        of 0 stops that motion (never "no limit")."""
         a, b, down = self.velocity_m_s
         xy = math.hypot(a, b)
-        if xy > max_xy_m_s > 0.0:
+        if xy > max_xy_m_s:
             a, b = a * max_xy_m_s / xy, b * max_xy_m_s / xy
         down = min(max(down, -max_up_m_s), max_down_m_s)
         yawspeed = min(max(self.yawspeed_deg_s, -max_yaw_deg_s), max_yaw_deg_s)

@@ -28,6 +28,12 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
         "dronectl.bench_ardupilot",
         "real ArduCopter SITL in lockstep: readiness, hover drift, speed",
     ),
+    "fuzz": ("dronectl.bench_fuzz", "hostile MAVLink against flying missions: crashes, commands obeyed"),
+    "disk-full": ("dronectl.bench_disk_full", "the disk fills mid-flight: landed by the controller?"),
+    "concurrent": (
+        "dronectl.bench_concurrent",
+        "several `fly` at once with defaults: own vehicle, own folder",
+    ),
 }
 
 
@@ -43,7 +49,7 @@ def main(argv: list[str]) -> int:
         return 0
     name, rest = argv[0], argv[1:]
     if name not in BENCHMARKS:
-        print(f"dronectl bench: unknown benchmark {name!r}\n\n{_usage()}", file=sys.stderr)
+        print(f"dronectl bench: unknown benchmark {name!r} (one of {', '.join(BENCHMARKS)})", file=sys.stderr)
         return 2
     module = importlib.import_module(BENCHMARKS[name][0])
     return int(module.main(rest) or 0)

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import argparse
-import json
-from pathlib import Path
 from typing import Any
 
 import controller.benchmarks.flight as bench
 from controller.benchmarks.flight import FlightBenchConfig, run_flight_bench
+from drone_inspect_core.files import write_json_atomic
+from dronectl.options import CommandParser, add_signing_key, at_least, new_file, signing_key
 from flight.errors import ConnectionUrlError
 from flight.urls import validate_connection_url
 
@@ -65,23 +64,22 @@ def _print_report(report: dict[str, Any]) -> None:
 
 
 def main(argv: list[str]) -> int:
-    """`dronectl bench flight [--json FILE] [--base-port N]`; returns 0 when every target is met."""
-    parser = argparse.ArgumentParser(prog="dronectl bench flight", description=bench.__doc__.splitlines()[0])
-    parser.add_argument("--json", type=Path, help="also write the numbers to this JSON file")
-    parser.add_argument(
-        "--base-port", type=int, default=14790, help="UDP ports base..base+2 (default %(default)s)"
-    )
-    parser.add_argument("--rtt-samples", type=int, default=200, help="command round trips to time")
+    """`dronectl bench flight [--json FILE] [--vehicle URL [--signing-key FILE]]`; 0: every target met."""
+    parser = CommandParser(prog="dronectl bench flight", description=bench.__doc__.splitlines()[0])
+    parser.add_argument("--json", type=new_file, help="also write the numbers to this JSON file")
+    parser.add_argument("--rtt-samples", type=at_least(1), default=200, help="command round trips to time")
     parser.add_argument(
         "--vehicle",
         help="fly a vehicle that is already running (e.g. udpin://0.0.0.0:14540 for `dronectl px4-sim`) "
         "instead of launching a sim-vehicle",
     )
+    add_signing_key(parser)
     args = parser.parse_args(argv)
     try:
-        config = FlightBenchConfig(
-            base_port=args.base_port, rtt_samples=args.rtt_samples, vehicle_url=args.vehicle
-        )
+        key = signing_key(args)
+        if key is not None and args.vehicle is None:
+            raise ValueError("--signing-key goes with --vehicle URL (a launched sim-vehicle has its own key)")
+        config = FlightBenchConfig(rtt_samples=args.rtt_samples, vehicle_url=args.vehicle, signing_key=key)
         if args.vehicle:
             validate_connection_url(args.vehicle)
     except (ValueError, ConnectionUrlError) as exc:
@@ -90,6 +88,6 @@ def main(argv: list[str]) -> int:
     _print_report(report)
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(report, indent=2) + "\n")
+        write_json_atomic(args.json, report, indent=2)
         print(f"wrote {args.json}")
     return 0 if all(report["target_met"].values()) else 1

@@ -11,7 +11,6 @@ printed beside the figures: other work on the machine slows them.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 from pathlib import Path
 from typing import Any
@@ -21,18 +20,22 @@ import torch
 from controller.benchmarks.perception import compare_detector_backends
 from controller.benchmarks.planner_latency import FIXED_INSTRUCTION, compare_backends, dataset_frames
 from controller.planning.planners import DEFAULT_CHECKPOINT
+from drone_inspect_core.files import write_json_atomic
+from dronectl.options import CommandParser, at_least, new_file
 from perception.image_detector import SHIPPED_DIR
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="dronectl bench inference", description=__doc__)
+    p = CommandParser(prog="dronectl bench inference", description=__doc__)
     p.add_argument("--data", type=Path, required=True, help="dataset folder: its test frames are timed")
     p.add_argument("--model", type=Path, default=DEFAULT_CHECKPOINT, help="planner checkpoint folder")
     p.add_argument("--weights", type=Path, default=SHIPPED_DIR, help="detector run folder")
-    p.add_argument("--decisions", type=int, default=1000, help="planner decisions timed per backend")
-    p.add_argument("--frames", type=int, default=1000, help="detector frames timed per backend (0: skip)")
-    p.add_argument("--threads", type=int, default=1, help="threads of either backend")
-    p.add_argument("--json", type=Path, default=None, help="also write the figures here")
+    p.add_argument("--decisions", type=at_least(1), default=1000, help="planner decisions timed per backend")
+    p.add_argument(
+        "--frames", type=at_least(0), default=1000, help="detector frames timed per backend (0: skip)"
+    )
+    p.add_argument("--threads", type=at_least(1), default=1, help="threads of either backend")
+    p.add_argument("--json", type=new_file, default=None, help="also write the figures here")
     return p
 
 
@@ -67,5 +70,5 @@ def main(argv: list[str]) -> int:
     print("\n".join(lines))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")
+        write_json_atomic(args.json, results, indent=2)
     return 0

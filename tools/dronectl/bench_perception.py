@@ -6,7 +6,6 @@ The measuring is `controller.benchmarks.perception`.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import tempfile
@@ -24,7 +23,9 @@ from controller.benchmarks.perception import (
     sample_images,
 )
 from controller.benchmarks.perception_accuracy import AccuracySampleSizes, run_accuracy_bench
+from drone_inspect_core.files import write_json_atomic
 from dronectl.collect_cmd import target_count
+from dronectl.options import CommandParser, at_least, new_file, seed_value
 from perception.image_detector import SHIPPED_DIR, ImageDetector
 
 RECALL_TARGET = 0.99
@@ -32,24 +33,28 @@ FP_TARGET = 0.01
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = CommandParser(
         prog="dronectl bench perception",
         description=bench.__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     d = AccuracySampleSizes()
-    p.add_argument("--json", type=Path, default=None, help="write the figures to this JSON file")
+    p.add_argument("--json", type=new_file, default=None, help="write the figures to this JSON file")
     p.add_argument("--weights", type=Path, default=SHIPPED_DIR, help="detector run folder (default: shipped)")
-    p.add_argument("--threads", type=int, default=1, help="threads for the detector")
+    p.add_argument("--threads", type=at_least(1), default=1, help="threads for the detector")
     p.add_argument(
         "--backend",
         default="auto",
         choices=("torch", "onnx", "auto"),
         help="detector backend for the latency (auto: onnx when onnxruntime is installed)",
     )
-    p.add_argument("--frames", type=int, default=300, help="frames timed for the detector latency")
-    p.add_argument("--stream-frames", type=int, default=100, help="frames timed through the stream (0: skip)")
-    p.add_argument("--seed", type=int, default=1234, help="seed of the sim scene of the stream benchmark")
+    p.add_argument("--frames", type=at_least(0), default=300, help="frames timed for the detector latency")
+    p.add_argument(
+        "--stream-frames", type=at_least(0), default=100, help="frames timed through the stream (0: skip)"
+    )
+    p.add_argument(
+        "--seed", type=seed_value, default=1234, help="seed of the sim scene of the stream benchmark"
+    )
     p.add_argument(
         "--work-dir",
         type=Path,
@@ -62,10 +67,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="score this dataset's test and empty splits instead of rendering the test sample",
     )
-    p.add_argument("--test", type=int, default=d.test, help="test images with the target in view")
-    p.add_argument("--test-empty", type=int, default=d.test_empty, help="empty test images")
-    p.add_argument("--validation", type=int, default=d.validation, help="validation images with the target")
-    p.add_argument("--validation-empty", type=int, default=d.validation_empty, help="empty validation images")
+    p.add_argument("--test", type=at_least(0), default=d.test, help="test images with the target in view")
+    p.add_argument("--test-empty", type=at_least(0), default=d.test_empty, help="empty test images")
+    p.add_argument(
+        "--validation", type=at_least(0), default=d.validation, help="validation images with the target"
+    )
+    p.add_argument(
+        "--validation-empty", type=at_least(0), default=d.validation_empty, help="empty validation images"
+    )
     p.add_argument(
         "--max-fp-rate",
         type=float,
@@ -78,8 +87,10 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="also measure recall over every target in scenes of N (or LO-HI) targets",
     )
-    p.add_argument("--multi", type=int, default=d.multi, help="images of the several-target sample")
-    p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes rendering the samples")
+    p.add_argument("--multi", type=at_least(1), default=d.multi, help="images of the several-target sample")
+    p.add_argument(
+        "--workers", type=at_least(1), default=os.cpu_count() or 1, help="processes rendering the samples"
+    )
     return p  # fmt: skip
 
 
@@ -219,6 +230,6 @@ def main(argv: list[str]) -> int:
               f"detector.score_threshold to {tuned:.2f} in {config}")  # fmt: skip
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")
+        write_json_atomic(args.json, results, indent=2)
         print(f"wrote {args.json}")
     return 0

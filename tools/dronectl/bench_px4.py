@@ -2,22 +2,26 @@
 
 from __future__ import annotations
 
-import argparse
-import json
 from pathlib import Path
 
 import controller.benchmarks.px4 as bench
 from controller.benchmarks.px4 import run_px4_bench
+from drone_inspect_core.files import write_json_atomic
+from dronectl.options import CommandParser, new_file, positive_float, px4_instance_value
 from sim_world.px4_bridge.px4_process import find_px4_dir
 
 
 def main(argv: list[str]) -> int:
     """`dronectl bench px4 [--px4 DIR] [--instance N] [--hover-s S] [--json FILE]`; 0: all targets met."""
-    parser = argparse.ArgumentParser(prog="dronectl bench px4", description=bench.__doc__.splitlines()[0])
+    parser = CommandParser(prog="dronectl bench px4", description=bench.__doc__.splitlines()[0])
     parser.add_argument("--px4", type=Path, help="PX4 SITL build folder (default: $PX4_SITL_DIR)")
-    parser.add_argument("--instance", type=int, default=8, help="PX4 instance (default %(default)s)")
-    parser.add_argument("--hover-s", type=float, default=30.0, help="hover length, simulated seconds")
-    parser.add_argument("--json", type=Path, help="also write the numbers to this JSON file")
+    parser.add_argument(
+        "--instance", type=px4_instance_value, default="auto", help="PX4 instance 0..9 or auto (default)"
+    )
+    parser.add_argument(
+        "--hover-s", type=positive_float, default=30.0, help="hover length, simulated seconds (default 30)"
+    )
+    parser.add_argument("--json", type=new_file, help="also write the numbers to this JSON file")
     args = parser.parse_args(argv)
     try:
         px4_dir = find_px4_dir(args.px4)
@@ -46,6 +50,6 @@ def main(argv: list[str]) -> int:
     )
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(report, indent=2) + "\n")
+        write_json_atomic(args.json, report, indent=2)
         print(f"wrote {args.json}")
     return 0 if all(met.values()) else 1

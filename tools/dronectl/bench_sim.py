@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import argparse
-import json
 import os
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 import controller.benchmarks.sim as bench
 from controller.benchmarks.sim import TARGETS, SimBenchSettings, cpu_hogs, run_sim_bench
+from drone_inspect_core.files import write_json_atomic
+from dronectl.options import CommandParser, at_least, new_file, seed_value
 from sim_world.rendering.render_mode import RENDER_MODES
 
 
@@ -60,15 +60,19 @@ def format_report(result: dict[str, Any]) -> str:
 
 def main(argv: list[str]) -> int:
     """Entry point of `dronectl bench sim` (called by tools/dronectl/bench_cmd.py)."""
-    parser = argparse.ArgumentParser(
+    parser = CommandParser(
         prog="dronectl bench sim",
         description=bench.__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--json", type=Path, default=None, help="also write the numbers to this JSON file")
-    parser.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
-    parser.add_argument("--collect-images", type=int, default=400, help="images for the throughput run")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="collection workers")
+    parser.add_argument(
+        "--json", type=new_file, default=None, help="also write the numbers to this JSON file"
+    )
+    parser.add_argument("--seed", type=seed_value, default=0, help="scene seed (default 0)")
+    parser.add_argument(
+        "--collect-images", type=at_least(1), default=400, help="images for the throughput run"
+    )
+    parser.add_argument("--workers", type=at_least(1), default=os.cpu_count() or 1, help="collection workers")
     parser.add_argument(
         "--render-mode",
         choices=RENDER_MODES,
@@ -95,6 +99,6 @@ def main(argv: list[str]) -> int:
     print(format_report(result))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+        write_json_atomic(args.json, result, indent=2)
         print(f"wrote {args.json}")
     return 0

@@ -14,7 +14,6 @@ stopped on another target, per truth; in-process sim only) per planner, and with
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 from pathlib import Path
@@ -23,10 +22,11 @@ from typing import Any
 from controller.benchmarks.missions import BenchmarkConfig, format_summary, run_benchmark
 from controller.missions.schema import FaultSpec, Mission, load_mission, parse_mission
 from controller.planning.planners import PLANNER_NAMES
-from drone_inspect_core.files import OutputDirError
+from drone_inspect_core.files import OutputDirError, write_json_atomic
 from drone_inspect_core.parallel import RayUnavailableError, add_ray_option
 from drone_inspect_core.sim_speed import parse_sim_speed
 from dronectl.ardupilot_options import add_ardupilot_options, resolve_ardupilot_dir
+from dronectl.options import CommandParser, at_least, new_file, seed_value
 from sim_world.ardupilot_bridge.ardupilot_process import ArduPilotFolderError
 from sim_world.px4_bridge.px4_process import Px4FolderError, find_px4_dir
 
@@ -105,9 +105,13 @@ def _speed(option: str, text: str) -> float | str:
 
 
 def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="dronectl benchmark-missions", description=__doc__.splitlines()[0])
-    parser.add_argument("--n", type=int, default=200, help="missions per planner (default: %(default)s)")
-    parser.add_argument("--seed", type=int, default=0, help="benchmark seed: picks the scenes and starts")
+    parser = CommandParser(prog="dronectl benchmark-missions", description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--n", type=at_least(1), default=200, help="missions per planner (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--seed", type=seed_value, default=0, help="benchmark seed: picks the scenes and starts"
+    )
     parser.add_argument(
         "--planner",
         default=",".join(PLANNER_NAMES),
@@ -134,7 +138,7 @@ def main(argv: list[str]) -> int:
         help="sim-mavlink: the sim-vehicle's speed, a factor (1 = real time, the default) or 'max'",
     )
     parser.add_argument("--checkpoint", help="latent planner checkpoint folder (default: the shipped one)")
-    parser.add_argument("--max-steps", type=int, help="step budget per mission (default: 20)")
+    parser.add_argument("--max-steps", type=at_least(1), help="step budget per mission (default: 20)")
     parser.add_argument("--epsilon-px", type=float, help="ε in pixels (default: 10 at 224 px)")
     parser.add_argument(
         "--kind", help="the named target's kind in every mission (default: drawn from the scene family)"
@@ -191,10 +195,13 @@ def main(argv: list[str]) -> int:
     )
     faults.add_argument("--vehicle-dies-at-s", type=float, help="the vehicle (or PX4) is killed at this time")
     parser.add_argument(
-        "--parallel", type=int, default=1, help="worker processes, or the local Ray's CPUs (default: 1)"
+        "--parallel",
+        type=at_least(1),
+        default=1,
+        help="worker processes, or the local Ray's CPUs (default: 1)",
     )
     add_ray_option(parser)
-    parser.add_argument("--json", type=Path, help="write the summary and every mission's row here")
+    parser.add_argument("--json", type=new_file, help="write the summary and every mission's row here")
     parser.add_argument(
         "--report", type=Path, help="keep each mission's report.json under this folder (new or empty)"
     )
@@ -239,6 +246,6 @@ def main(argv: list[str]) -> int:
     print(format_summary(summary))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(summary, indent=1))
+        write_json_atomic(args.json, summary, indent=1)
         print(f"wrote {args.json}", file=sys.stderr)
     return 0

@@ -3,20 +3,21 @@
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from controller.planning.actions import ALL_ACTIONS
+from drone_inspect_core.files import write_json_atomic
+from dronectl.options import CommandParser, at_least, new_file, seed_value
 
 if TYPE_CHECKING:
     from controller.evaluation.evaluate import EvalResult
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="dronectl evaluate", description=__doc__)
+    p = CommandParser(prog="dronectl evaluate", description=__doc__)
     p.add_argument("--model", type=Path, required=True, help="checkpoint folder written by `dronectl train`")
     p.add_argument("--data", type=Path, required=True, help="dataset folder")
     p.add_argument(
@@ -36,12 +37,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--split", default="test", choices=("test", "train", "goal"), help="dataset split to score"
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the image/instruction pairing")
+    p.add_argument("--seed", type=seed_value, default=0, help="seed of the image/instruction pairing")
     p.add_argument("--epsilon-px", type=float, default=None, help="ε in dataset pixels (default 10 at 224)")
     p.add_argument(
-        "--latency", type=int, default=0, metavar="N", help="also time N planner decisions on the test images"
+        "--latency",
+        type=at_least(0),
+        default=0,
+        metavar="N",
+        help="also time N planner decisions on the test images",
     )
-    p.add_argument("--threads", type=int, default=1, help="threads for the latency measurement")
+    p.add_argument("--threads", type=at_least(1), default=1, help="threads for the latency measurement")
     p.add_argument(
         "--backend",
         default="auto",
@@ -54,12 +59,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="score each image with its left-right mirror image too (test-time augmentation, as the "
         "planner does where its checkpoint's config.json says planner.mirror_tta)",
     )
-    p.add_argument("--json", type=Path, default=None, help="also write the full result as JSON here")
+    p.add_argument("--json", type=new_file, default=None, help="also write the full result as JSON here")
     return p
 
 
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
+    if args.latency < 0 or args.threads < 1:
+        raise ValueError(f"--latency must be >= 0 and --threads >= 1, got {args.latency} and {args.threads}")
     from controller.evaluation.evaluate import evaluate_checkpoint_modes
     from controller.planning.latent.errors import LatentError
     from drone_inspect_core.dataset import DatasetError
@@ -88,7 +95,7 @@ def main(argv: list[str]) -> int:
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         payload = results[0].__dict__ if len(results) == 1 else {r.instructions: r.__dict__ for r in results}
-        args.json.write_text(json.dumps(payload, indent=1) + "\n")
+        write_json_atomic(args.json, payload, indent=1)
     return 0
 
 

@@ -9,37 +9,40 @@ also gives the `dronectl benchmark-missions` command that reproduces it alone.
 
 from __future__ import annotations
 
-import argparse
-import json
 import logging
 import sys
-from pathlib import Path
 from typing import Any
 
 from controller.benchmarks.fault_matrix import format_markdown, run_fault_matrix
 from controller.benchmarks.missions import BenchmarkConfig
+from drone_inspect_core.files import write_atomic, write_json_atomic
 from dronectl.ardupilot_options import FOLDER_HELP, resolve_ardupilot_dir
+from dronectl.options import CommandParser, at_least, new_file, seed_value
+from sim_world.px4_bridge.px4_process import find_px4_dir
 
 
 def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="dronectl fault-matrix", description=__doc__.splitlines()[0])
+    parser = CommandParser(prog="dronectl fault-matrix", description=__doc__.splitlines()[0])
     parser.add_argument(
         "--vehicle", default="sim-mavlink", choices=("sim-mavlink", "px4-sitl", "ardupilot-sitl")
     )
     parser.add_argument("--px4", help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
     parser.add_argument("--ardupilot", help=FOLDER_HELP)
-    parser.add_argument("--n", type=int, default=20, help="missions per fault (default: %(default)s)")
-    parser.add_argument("--seed", type=int, default=1, help="benchmark seed (default: %(default)s)")
+    parser.add_argument("--n", type=at_least(1), default=20, help="missions per fault (default: %(default)s)")
+    parser.add_argument("--seed", type=seed_value, default=1, help="benchmark seed (default: %(default)s)")
     parser.add_argument("--planner", default="latent", help="one planner (default: %(default)s)")
-    parser.add_argument("--parallel", type=int, default=2, help="worker processes (default: %(default)s)")
-    parser.add_argument("--out", type=Path, help="write the markdown table here")
-    parser.add_argument("--json", type=Path, help="write the rows as JSON here")
+    parser.add_argument(
+        "--parallel", type=at_least(1), default=2, help="worker processes (default: %(default)s)"
+    )
+    parser.add_argument("--out", type=new_file, help="write the markdown table here")
+    parser.add_argument("--json", type=new_file, help="write the rows as JSON here")
     args = parser.parse_args(argv)
     logging.getLogger().setLevel(logging.WARNING)
     try:
         mission: dict[str, Any] = {"vehicle": args.vehicle}
         if args.vehicle == "px4-sitl":
-            mission["px4"] = {"dir": args.px4, "speed": "max", "keep_ulog": False}
+            # a missing PX4 folder is named before anything flies
+            mission["px4"] = {"dir": str(find_px4_dir(args.px4)), "speed": "max", "keep_ulog": False}
         if args.vehicle == "ardupilot-sitl":
             mission["ardupilot"] = {
                 "dir": resolve_ardupilot_dir(args.ardupilot),
@@ -56,8 +59,9 @@ def main(argv: list[str]) -> int:
     print(table)
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(table)
+        write_atomic(args.out, table)
         print(f"wrote {args.out}", file=sys.stderr)
     if args.json:
-        args.json.write_text(json.dumps(rows, indent=1))
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(args.json, rows, indent=1)
     return 0

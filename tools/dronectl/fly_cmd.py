@@ -12,7 +12,8 @@ Real PX4 firmware (SITL) flying the simulated world: `--vehicle px4-sitl --px4 D
 (`--ardupilot DIR`, default $ARDUPILOT_SITL_DIR, else ../shared/ardupilot-sitl).
 
 A real vehicle: a mission file with `vehicle: udpin://0.0.0.0:14540` and
-`camera: http://<drone>:8080/stream.mjpg` (or the same as --vehicle/--camera).
+`camera: http://<drone>:8080/stream.mjpg` (or the same as --vehicle/--camera); one set up with
+MAVLink 2 signing: `--signing-key FILE` (32 bytes as 64 hex digits or base64).
 Exit status 0 when the mission's expectations hold, 1 when they do not, 2 on a
 bad mission file or option.
 """
@@ -35,8 +36,9 @@ from controller.missions.schema import (
     load_mission,
 )
 from controller.planning.planners import PLANNER_NAMES
-from drone_inspect_core.files import OutputDirError
+from drone_inspect_core.files import OutputDirError, claim_fresh_dir
 from dronectl.ardupilot_options import add_ardupilot_options, apply_ardupilot_options
+from dronectl.options import CommandParser, add_signing_key, at_least, say_error, seed_value, signing_key
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[2] / "missions" / "default.yaml"
 
@@ -107,15 +109,15 @@ def summary_lines(result: MissionResult) -> list[str]:
 
 
 def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="dronectl fly", description=__doc__.splitlines()[0])
+    parser = CommandParser(prog="dronectl fly", description=__doc__.splitlines()[0])
     parser.add_argument(
         "--mission", type=Path, default=DEFAULT_MISSION, help="mission YAML (default: %(default)s)"
     )
     parser.add_argument("--planner", choices=PLANNER_NAMES, help="override the mission's planner")
     parser.add_argument("--checkpoint", help="latent planner checkpoint folder (default: the shipped one)")
-    parser.add_argument("--seed", type=int, help="override the scene seed (and a random start's seed)")
+    parser.add_argument("--seed", type=seed_value, help="override the scene seed (and a random start's seed)")
     parser.add_argument("--epsilon-px", type=float, help="override ε, pixels")
-    parser.add_argument("--max-steps", type=int, help="override the step budget")
+    parser.add_argument("--max-steps", type=at_least(1), help="override the step budget")
     parser.add_argument(
         "--vehicle", help="override the vehicle: sim, sim-mavlink, px4-sitl, ardupilot-sitl or a MAVLink URL"
     )
@@ -143,6 +145,7 @@ def main(argv: list[str]) -> int:
         metavar="FILE.rrd",
         help="also record the flight for the Rerun viewer (a new file; needs the [rerun] extra)",
     )
+    add_signing_key(parser)
     parser.add_argument("-v", "--verbose", action="store_true", help="log every module's progress")
     args = parser.parse_args(argv)
     if not args.verbose:
@@ -153,10 +156,16 @@ def main(argv: list[str]) -> int:
         if args.seed is not None:
             mission = mission.with_seed(args.seed)
         mission = apply_ardupilot_options(_px4_options(mission, args), args)
+        key = signing_key(args)
+        if key is not None and not mission.is_real:
+            raise ValueError(
+                f"--signing-key is for a real vehicle set up with that key; {mission.vehicle} gets a key "
+                "of its own per run (sim-mavlink) or cannot sign (px4-sitl, ardupilot-sitl, sim)"
+            )
     except (MissionFileError, ValueError) as exc:
         print(f"dronectl fly: {exc}", file=sys.stderr)
         return 2
-    from controller.missions.report import claim_report_dir, fresh_report_dir
+    from controller.missions.report import claim_report_dir
     from controller.missions.runner import run_mission
 
     if args.rerun is not None:
@@ -169,16 +178,17 @@ def main(argv: list[str]) -> int:
             return 2
     default_out = Path("runs") / "fly" / f"{mission.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     try:
-        out = claim_report_dir(args.out or fresh_report_dir(default_out))
+        # A given --out is this run's or an error; a default one is the first free name (runs at once).
+        out = claim_report_dir(args.out) if args.out else claim_fresh_dir(default_out, "report folder")
     except OutputDirError as exc:
         print(f"dronectl fly: --out {exc}", file=sys.stderr)
         return 2
     print(f"flying {mission.name} ({mission.vehicle}, planner {mission.planner}) ...", flush=True)
     try:
-        result = run_mission(mission, out, rerun_path=args.rerun, claimed=True)
+        result = run_mission(mission, out, rerun_path=args.rerun, claimed=True, signing_key=key)
     except Exception as exc:  # could not start: a clear line, not a traceback
-        print(f"dronectl fly: {mission.name} could not start: {type(exc).__name__}: {exc}", file=sys.stderr)
-        print(f"      report: {out / 'report.json'} (why it did not start)", file=sys.stderr)
+        why = f"{type(exc).__name__}: {exc}"
+        say_error("dronectl fly", f"{mission.name} could not start: {why} (report: {out / 'report.json'})")
         return 1
     print("\n".join(summary_lines(result)))
     if args.rerun is not None and args.rerun.exists():

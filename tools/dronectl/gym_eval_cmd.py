@@ -8,29 +8,33 @@ simulator truth within the step budget", with its 95 % Wilson interval.
 
 from __future__ import annotations
 
-import argparse
-import json
 import logging
 import sys
-from pathlib import Path
+
+from drone_inspect_core.files import write_json_atomic
+from dronectl.options import CommandParser, at_least, new_file, seed_value
 
 
 def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="dronectl gym-eval", description=__doc__.splitlines()[0])
+    parser = CommandParser(prog="dronectl gym-eval", description=__doc__.splitlines()[0])
     parser.add_argument(
         "--policy", default="latent,random,oracle", help="comma-separated (default: %(default)s)"
     )
     parser.add_argument(
-        "--episodes", type=int, default=100, help="episodes per policy (default: %(default)s)"
+        "--episodes", type=at_least(1), default=100, help="episodes per policy (default: %(default)s)"
     )
-    parser.add_argument("--seed", type=int, default=0, help="picks the episodes (default: %(default)s)")
-    parser.add_argument("--max-steps", type=int, default=20, help="step budget (default: %(default)s)")
+    parser.add_argument(
+        "--seed", type=seed_value, default=0, help="picks the episodes (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--max-steps", type=at_least(1), default=20, help="step budget (default: %(default)s)"
+    )
     parser.add_argument("--moves", default="fixed", choices=("fixed", "constant"), help="move lengths")
     parser.add_argument(
         "--instructions", default="fixed", choices=("fixed", "train", "heldout"), help="phrasing corpus"
     )
     parser.add_argument("--checkpoint", help="latent planner checkpoint folder (default: the shipped one)")
-    parser.add_argument("--json", type=Path, help="write the summary and every episode here")
+    parser.add_argument("--json", type=new_file, help="write the summary and every episode here")
     args = parser.parse_args(argv)
     logging.getLogger().setLevel(logging.WARNING)
     try:
@@ -48,6 +52,6 @@ def main(argv: list[str]) -> int:
     print(format_table(result, policies))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=1))
+        write_json_atomic(args.json, result, indent=1)
         print(f"wrote {args.json}", file=sys.stderr)
     return 0

@@ -7,7 +7,6 @@ Exit status 0 when every mission passed, 1 when any failed, 2 on a bad mission f
 
 from __future__ import annotations
 
-import argparse
 import logging
 import sys
 import time
@@ -19,20 +18,23 @@ from controller.missions.suite import SuiteOptions, format_table, run_suite, wri
 from controller.planning.planners import PLANNER_NAMES
 from drone_inspect_core.files import OutputDirError
 from dronectl.ardupilot_options import FOLDER_HELP
+from dronectl.options import CommandParser, at_least, new_file
 
 
 def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="dronectl missions", description=__doc__.splitlines()[0])
+    parser = CommandParser(prog="dronectl missions", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="action", required=True)
     run = sub.add_parser("run", help="fly every mission of a folder")
     run.add_argument("directory", type=Path, help="folder of mission YAML files")
-    run.add_argument("--junit", type=Path, help="write JUnit XML here")
+    run.add_argument("--junit", type=new_file, help="write JUnit XML here")
     run.add_argument(
         "--report",
         type=Path,
         help="report folders go here; new or empty (default: a fresh runs/missions/<time>)",
     )
-    run.add_argument("--parallel", type=int, default=1, help="missions flown at once, one process each")
+    run.add_argument(
+        "--parallel", type=at_least(1), default=1, help="missions flown at once, one process each"
+    )
     run.add_argument(
         "--tag", action="append", default=[], help="fly only missions with this tag (repeatable)"
     )

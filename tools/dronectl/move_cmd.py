@@ -12,16 +12,16 @@ PX4 SITL (it sends to udp 14540 too) or a real vehicle: the same command with
 
 from __future__ import annotations
 
-import argparse
 import sys
 
+from dronectl.options import CommandParser, add_signing_key, seed_value, signing_key
 from flight.errors import FlightError
 from flight.safety import SafetyLimits
 from flight.scenario import SIM_VEHICLE, MoveFlight, fly_move, open_vehicle
 
 
 def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="dronectl move", description=__doc__.splitlines()[0])
+    parser = CommandParser(prog="dronectl move", description=__doc__.splitlines()[0])
     parser.add_argument(
         "--vehicle",
         default="udpin://0.0.0.0:14540",
@@ -36,7 +36,8 @@ def main(argv: list[str]) -> int:
         "--takeoff-alt", type=float, default=2.5, help="takeoff altitude, m (default: %(default)s)"
     )
     parser.add_argument("--max-speed", type=float, default=1.0, help="safety limit on horizontal speed, m/s")
-    parser.add_argument("--seed", type=int, default=0, help="world seed for --vehicle sim")
+    parser.add_argument("--seed", type=seed_value, default=0, help="world seed for --vehicle sim")
+    add_signing_key(parser)
     args = parser.parse_args(argv)
     if args.right_m == 0.0 and args.forward_m == 0.0 and args.down_m == 0.0:
         parser.error(
@@ -51,11 +52,12 @@ def main(argv: list[str]) -> int:
             takeoff_alt_m=args.takeoff_alt,
         )
         limits = SafetyLimits(max_horizontal_speed_m_s=args.max_speed)
+        key = signing_key(args)
     except ValueError as exc:
         parser.error(str(exc))
     print(f"connecting to {args.vehicle} ...")
     try:
-        with open_vehicle(args.vehicle, seed=args.seed) as vehicle:
+        with open_vehicle(args.vehicle, seed=args.seed, signing_key=key) as vehicle:
             result = fly_move(vehicle, flight, limits)
     except FlightError as exc:
         print(f"dronectl move: {exc}", file=sys.stderr)

@@ -11,12 +11,16 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
+from drone_inspect_core.ports import PortInUseError
 from drone_inspect_core.sim_speed import MAX_SPEED, parse_sim_speed
 from drone_inspect_core.world_options import StartPose
+from dronectl.options import CommandParser, seed_value
 from sim_world.px4_bridge.bridge import BridgeTiming
 from sim_world.px4_bridge.geodesy import HomePoint
+from sim_world.px4_bridge.instances import Px4InstanceBusyError, conventional_ports, px4_instance
 from sim_world.px4_bridge.px4_process import MAX_INSTANCE, Px4FolderError, find_px4_dir
 from sim_world.px4_bridge.run import Px4SimConfig, serve
 from sim_world.px4_bridge.sensors import SensorNoise
@@ -46,15 +50,28 @@ def _home(text: str) -> HomePoint:
     return HomePoint(lat, lon, alt)
 
 
+def _instance(text: str) -> int | str:
+    if text == "auto":
+        return text
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected 0..{MAX_INSTANCE} or 'auto', got {text!r}") from None
+    if not 0 <= value <= MAX_INSTANCE:
+        raise argparse.ArgumentTypeError(f"expected 0..{MAX_INSTANCE} or 'auto', got {value}")
+    return value
+
+
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="dronectl px4-sim", description=__doc__)
+    ap = CommandParser(prog="dronectl px4-sim", description=__doc__)
     px4 = ap.add_argument_group("PX4")
     px4.add_argument("--px4", type=Path, help="PX4 SITL build folder (default: $PX4_SITL_DIR)")
     px4.add_argument(
         "--instance",
-        type=int,
+        type=_instance,
         default=0,
-        help=f"PX4 instance 0..{MAX_INSTANCE}: ports shift by N (default 0)",
+        help=f"PX4 instance 0..{MAX_INSTANCE}: ports shift by N (default 0), or 'auto': the lowest one "
+        "no other run holds and whose ports are free; the ports are checked before anything starts",
     )
     px4.add_argument("--sysid", type=int, help="PX4's MAVLink system id (default PX4's: 1+N)")
     px4.add_argument(
@@ -73,7 +90,7 @@ def _parser() -> argparse.ArgumentParser:
         help="simulated seconds per wall second, or 'max' (lockstep as fast as it goes); default 1",
     )
     sim.add_argument("--scene", type=Path, help="scene YAML file (default: the built-in scene)")
-    sim.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
+    sim.add_argument("--seed", type=seed_value, default=0, help="scene seed (default 0)")
     sim.add_argument(
         "--start-offset",
         help="right,up,distance,yaw: start landed below this pose in front of the target",
@@ -100,30 +117,39 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
-    try:
-        px4_dir = find_px4_dir(args.px4)
-        if not 0 < args.noise <= 10:
-            raise ValueError(
-                f"--noise must be in (0, 10], got {args.noise:g} (PX4 rejects perfectly constant sensors)"
-            )
-        config = Px4SimConfig(
-            px4_dir=px4_dir,
-            instance=args.instance,
-            scene=DEFAULT_SCENE if args.scene is None else load_scene_config(args.scene),
-            seed=args.seed,
-            start_offset=StartPose.parse(args.start_offset) if args.start_offset else None,
-            image_size_px=args.size,
-            camera=not args.no_camera,
-            video_port=args.video_port,
-            timing=BridgeTiming(speed=args.speed, camera_fps=args.fps),
-            home=args.home,
-            noise=SensorNoise().scaled(args.noise),
-            system_id=args.sysid,
-            params=parse_param_overrides(args.param),
-            px4_log_dir=args.px4_logs,
-            duration_s=args.duration,
-        )
+    try:  # everything checked before an instance is taken or anything starts
+        config = _config(args, 0 if args.instance == "auto" else args.instance)
     except (Px4FolderError, SceneConfigError, ParamError, ValueError) as exc:
         print(f"dronectl px4-sim: {exc}", file=sys.stderr)
         return 2
-    return serve(config, sys.stdout)
+    try:
+        with px4_instance(args.instance, conventional_ports) as instance:
+            return serve(replace(config, instance=instance), sys.stdout)
+    except (Px4InstanceBusyError, PortInUseError) as exc:
+        print(f"dronectl px4-sim: {exc}", file=sys.stderr)
+        return 2
+
+
+def _config(args: argparse.Namespace, instance: int) -> Px4SimConfig:
+    px4_dir = find_px4_dir(args.px4)
+    if not 0 < args.noise <= 10:
+        raise ValueError(
+            f"--noise must be in (0, 10], got {args.noise:g} (PX4 rejects perfectly constant sensors)"
+        )
+    return Px4SimConfig(
+        px4_dir=px4_dir,
+        instance=instance,
+        scene=DEFAULT_SCENE if args.scene is None else load_scene_config(args.scene),
+        seed=args.seed,
+        start_offset=StartPose.parse(args.start_offset) if args.start_offset else None,
+        image_size_px=args.size,
+        camera=not args.no_camera,
+        video_port=args.video_port,
+        timing=BridgeTiming(speed=args.speed, camera_fps=args.fps),
+        home=args.home,
+        noise=SensorNoise().scaled(args.noise),
+        system_id=args.sysid,
+        params=parse_param_overrides(args.param),
+        px4_log_dir=args.px4_logs,
+        duration_s=args.duration,
+    )

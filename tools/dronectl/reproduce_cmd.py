@@ -8,10 +8,11 @@ from pathlib import Path
 
 from controller.training.config import PRESETS
 from drone_inspect_core.parallel import add_ray_option
+from dronectl.options import CommandParser, at_least
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="dronectl reproduce", description=__doc__)
+    p = CommandParser(prog="dronectl reproduce", description=__doc__)
     p.add_argument(
         "--data",
         type=Path,
@@ -23,10 +24,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=int, default=5, help="seeds per experiment (paper: 5)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="cpu")
     p.add_argument(
-        "--workers", type=int, default=1, help="training processes in parallel (or the local Ray's CPUs)"
+        "--workers",
+        type=at_least(1),
+        default=1,
+        help="training processes in parallel (or the local Ray's CPUs)",
     )
     add_ray_option(p)
-    p.add_argument("--threads", type=int, default=2, help="torch threads shared by all workers")
+    p.add_argument("--threads", type=at_least(1), default=2, help="torch threads shared by all workers")
     p.add_argument(
         "--experiments",
         choices=("all", "table2", "table3", "main", "grounded"),
@@ -39,7 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--heldout-look", type=Path, default=None, help="grounded: the held-out scene family's test folder"
     )
-    p.add_argument("--epochs", type=int, default=None, help="override the preset's epochs")
+    p.add_argument("--epochs", type=at_least(1), default=None, help="override the preset's epochs")
     return p
 
 
@@ -53,6 +57,12 @@ def main(argv: list[str]) -> int:
         )
     if args.experiments == "grounded" and not (args.test or args.heldout_look):
         raise SystemExit("dronectl reproduce: --experiments grounded needs --test and/or --heldout-look")
+    if args.threads < 1:
+        raise SystemExit(f"dronectl reproduce: --threads must be >= 1, got {args.threads}")
+    from drone_inspect_core.dataset import load_manifest
+
+    for folder in [*args.data, *args.test, *([args.heldout_look] if args.heldout_look else [])]:
+        load_manifest(folder, check_images=False)  # every dataset checked before any training starts
     from controller.evaluation.reproduce import ReproduceTaskError, reproduce
     from controller.evaluation.reproduce_grounded import reproduce_grounded
     from drone_inspect_core.parallel import RayUnavailableError

@@ -10,12 +10,14 @@ import argparse
 import sys
 from pathlib import Path
 
+from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.sim_speed import SimSpeed, parse_sim_speed
 from drone_inspect_core.world_options import StartPose
+from dronectl.options import CommandParser, seed_value
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfigError, load_scene_config
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.config import SimVehicleConfig
-from sim_world.vehicle.params import ParamError, parse_param_overrides
+from sim_world.vehicle.params import ParamError, checked_overrides, parse_param_overrides
 from sim_world.vehicle.serve import SimVehicleRun, serve
 
 
@@ -27,7 +29,7 @@ def _speed(text: str) -> SimSpeed:
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="dronectl sim-vehicle", description=__doc__)
+    ap = CommandParser(prog="dronectl sim-vehicle", description=__doc__)
     net = ap.add_argument_group("MAVLink and video")
     net.add_argument(
         "--instance", type=int, default=0, help="PX4 SITL instance number: shifts every port by N"
@@ -40,6 +42,12 @@ def _parser() -> argparse.ArgumentParser:
     net.add_argument("--video-port", type=int, help="MJPEG HTTP port (default 8080+N)")
     net.add_argument("--video-fps", type=float, default=15.0, help="camera frames per second (default 15)")
     net.add_argument("--no-video", action="store_true", help="serve no camera (saves the rendering CPU)")
+    net.add_argument(
+        "--signing-key",
+        metavar="FILE",
+        help="MAVLink 2 signing: sign everything and obey only messages signed with this key (32 bytes, "
+        "64 hex digits or base64 on one line); fly it with `--signing-key FILE` too",
+    )
     sim = ap.add_argument_group("simulation")
     sim.add_argument(
         "--speed",
@@ -49,7 +57,7 @@ def _parser() -> argparse.ArgumentParser:
         "it steps; above 1 the setpoint-loss and preflight-disarm timers also count wall time",
     )
     sim.add_argument("--scene", type=Path, help="scene YAML file (default: the built-in scene)")
-    sim.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
+    sim.add_argument("--seed", type=seed_value, default=0, help="scene seed (default 0)")
     sim.add_argument("--size", type=int, default=224, help="camera image size in pixels (default 224)")
     sim.add_argument(
         "--start-offset",
@@ -81,11 +89,12 @@ def main(argv: list[str]) -> int:
             sysid=args.sysid,
             speed=args.speed,
             commander=CommanderConfig(arming_boot_delay_s=args.boot_delay),
-            params=parse_param_overrides(args.param),
+            params=checked_overrides(parse_param_overrides(args.param)),
             video=not args.no_video,
             video_port=args.video_port,
             video_host=args.bind,
             video_fps=args.video_fps,
+            signing_key=None if args.signing_key is None else SigningKey.load(args.signing_key),
         )
         run = SimVehicleRun(
             vehicle=vehicle,

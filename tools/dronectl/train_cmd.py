@@ -9,10 +9,11 @@ from pathlib import Path
 
 from controller.planning.latent.config import DISTANCES, FUSIONS, POOLINGS
 from controller.training.config import PRESET_NOTES, PRESETS, AugmentConfig, LossWeights, run_configs
+from dronectl.options import CommandParser, at_least, seed_value
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="dronectl train", description=__doc__)
+    p = CommandParser(prog="dronectl train", description=__doc__)
     p.add_argument(
         "--data",
         type=Path,
@@ -31,12 +32,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--distance", choices=DISTANCES, default=None, help="D: cosine (default), euclidean, both")
     p.add_argument("--instructions", choices=("fixed", "varied"), default=None, help="default varied")
-    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--seed", type=seed_value, default=None)
     p.add_argument(
         "--loss-weights", type=LossWeights.parse, default=None, metavar="dir=1,rank=1,cons=1,reg=1"
     )
-    p.add_argument("--epochs", type=int, default=None, help="default: the preset's (paper 50, cpu 30)")
-    p.add_argument("--threads", type=int, default=None, help="torch threads (default 2)")
+    p.add_argument(
+        "--epochs", type=at_least(1), default=None, help="default: the preset's (paper 50, cpu 30)"
+    )
+    p.add_argument("--threads", type=at_least(1), default=None, help="torch threads (default 2)")
     p.add_argument("--image-size", type=int, default=None, help="override the preset's input size")
     p.add_argument("--width", type=int, default=None, help="override the preset's CNN base width")
     p.add_argument(
@@ -49,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--temperature", type=float, default=None, help="ranking τ (paper 1.0, cpu 0.1)")
     p.add_argument("--pooling", choices=POOLINGS, default=None, help="E_img head (paper: gap)")
     p.add_argument("--fusion", choices=FUSIONS, default=None, help="state fusion (paper: linear)")
-    p.add_argument("--batch-size", type=int, default=None, help="default 64")
+    p.add_argument("--batch-size", type=at_least(1), default=None, help="default 64")
     p.add_argument(
         "--translate",
         type=float,

@@ -4,18 +4,20 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import torch
 
 from drone_inspect_core.dataset import DatasetError
+from dronectl.options import CommandParser, at_least, seed_value
 from perception.detector_model import DetectorConfig
 from perception.errors import PerceptionError
 from perception.training.train import TrainDetectorConfig, train_detector
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="dronectl train-detector", description=__doc__)
+    p = CommandParser(prog="dronectl train-detector", description=__doc__)
     p.add_argument("--data", type=Path, required=True, help="dataset folder written by `dronectl collect`")
     p.add_argument(
         "--extra",
@@ -31,21 +33,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--init", type=Path, default=None, help="start from this run folder's weights (fine-tuning)"
     )
-    p.add_argument("--epochs", type=int, default=30)
-    p.add_argument("--batch-size", type=int, default=32)
+    p.add_argument("--epochs", type=at_least(1), default=30)
+    p.add_argument("--batch-size", type=at_least(1), default=32)
     p.add_argument("--lr", type=float, default=2e-3)
     p.add_argument("--crop", type=int, default=128, help="training crop size in pixels (multiple of 32)")
     p.add_argument(
         "--val-fraction", type=float, default=0.1, help="share of training rows held out for validation"
     )
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--threads", type=int, default=2, help="torch threads")
+    p.add_argument("--seed", type=seed_value, default=0)
+    p.add_argument("--threads", type=at_least(1), default=2, help="torch threads")
     p.add_argument("--input-size", type=int, default=224, help="network input size (multiple of 32)")
     return p
 
 
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
+    if args.threads < 1:
+        raise ValueError(f"--threads must be >= 1, got {args.threads}")
     torch.set_num_threads(args.threads)
     config = TrainDetectorConfig(
         data_dir=args.data,
@@ -63,7 +67,7 @@ def main(argv: list[str]) -> int:
     try:
         result = train_detector(config)
     except (DatasetError, PerceptionError) as exc:
-        print(f"dronectl train-detector: {exc}")
+        print(f"dronectl train-detector: {exc}", file=sys.stderr)
         return 1
     print(f"best epoch {result.best_epoch} (val loss {result.best_val_loss:.4f}) in {result.seconds:.0f} s")
     print(f"weights: {args.out / 'model.safetensors'}")

@@ -3,14 +3,18 @@
 `python -m sim_world.px4_bridge` runs as a child (its own session, gone with us):
 the world with the drone landed below the mission's start pose, its camera as
 MJPEG, and PX4 SITL in external-simulator mode in lockstep with it. The controller
-then talks to PX4 exactly as to a real vehicle: PX4 sends to 127.0.0.1:14540+N,
+then talks to PX4 exactly as to a real vehicle: PX4 sends to 127.0.0.1, to the port
 where the .tlog relay listens and forwards to MAVSDK; the camera is read with
 OpenCV from the MJPEG stream; the bridge's `/truth.json` is read for judging only.
 
-Every run holds its PX4 instance N (`px4_process.px4_instance`: `auto` takes the lowest
-free one, so parallel missions and test workers never share ports), and gives PX4 a
-random MAVLink system id: MAVSDK connects only to that id, so a PX4 left over from
-another run is never flown.
+Every run holds its PX4 instance N (`instances.px4_instance`: `auto` takes the lowest one no
+other run or PX4 holds) and takes every port free for itself: the relay's, PX4's one MAVLink
+link (PX4 runs no other: `px4_process.Px4Ports`), the simulator's TCP port, MAVSDK's and the
+video's; so parallel missions never share a port, whatever else runs on the machine. PX4 gets a
+random MAVLink system id (MAVSDK and the relay take only that one, so a PX4 left over from another
+run is never flown) and the vehicle's own limits as parameters (`VehicleLimits.px4_params`, a little
+wider than the controller's; the mission's `px4.params` win). PX4 v1.15 cannot sign: the relay,
+locked onto this PX4's heartbeat and address, is the guard.
 """
 
 from __future__ import annotations
@@ -28,71 +32,89 @@ from controller.missions.kits.simulated import (
     new_system_id,
     simulated_mavlink_kit,
     simulated_world_fields,
+    vehicle_limits_for,
 )
 from controller.missions.schema import Mission
 from controller.missions.setup import start_offset_for
+from drone_inspect_core.ports import free_port
+from drone_inspect_core.vehicle_limits import VehicleLimits
 from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
+from flight.safety import SafetyLimits
 from flight.sim_launcher import SimulatorProcess
 from perception.stream_camera import StreamCamera
 from sim_world.px4_bridge.bridge import PX4_CLOCK_OFFSET_US, BridgeTiming
-from sim_world.px4_bridge.px4_process import find_px4_dir, px4_instance
-from sim_world.px4_bridge.run import OFFBOARD_PORT_BASE, READY_PREFIX, Px4SimConfig
+from sim_world.px4_bridge.instances import px4_instance
+from sim_world.px4_bridge.px4_process import find_px4_dir
+from sim_world.px4_bridge.run import READY_PREFIX, Px4SimConfig
 from sim_world.px4_bridge.sensors import SensorNoise
 
 log = logging.getLogger(__name__)
 
-MAVSDK_PORT_BASE = 15140  # MAVSDK listens behind the relay on 15140+N (clear of the tests' 146xx-149xx)
-VIDEO_PORT_BASE = 18900  # the bridge's MJPEG stream on 18900+N
 PX4_START_TIMEOUT_S = 90.0
 
 
-def px4_sim_config(mission: Mission, instance: int, out_dir: Path, system_id: int) -> Px4SimConfig:
-    """The simulator's configuration for a mission (its world, start, PX4 options)."""
+def px4_sim_config(
+    mission: Mission,
+    instance: int,
+    out_dir: Path,
+    system_id: int,
+    relay_port: int,
+    limits: VehicleLimits | None = None,
+) -> Px4SimConfig:
+    """The simulator's configuration for a mission (its world, start, PX4 options): every port free,
+    PX4's link sending to the relay on `relay_port`, the vehicle's `limits` as PX4 parameters."""
     spec = mission.px4
+    params = {**(limits.px4_params() if limits is not None else {}), **spec.params}
     start = start_offset_for(mission, SIM_HFOV_DEG, SIM_HFOV_DEG)
     return Px4SimConfig(
         px4_dir=find_px4_dir(spec.dir),
         instance=instance,
         **simulated_world_fields(mission, start),
-        video_port=VIDEO_PORT_BASE + instance,
+        video_port=0,
         timing=BridgeTiming(speed=None if spec.speed == "max" else float(spec.speed)),
         noise=SensorNoise().scaled(spec.noise),
         system_id=system_id,
-        params=dict(spec.params),
+        params=params,
         px4_log_dir=out_dir / "px4" if spec.keep_ulog else None,
         px4_dies_at_s=mission.faults.vehicle_dies_at_s,
+        mavlink_remote_port=relay_port,
     )
 
 
 @contextmanager
 def open_px4_sitl_kit(
-    mission: Mission, out_dir: Path, models: LoadedModels | None = None
+    mission: Mission, out_dir: Path, models: LoadedModels | None = None, limits: SafetyLimits | None = None
 ) -> Iterator[FlightKit]:
-    """PX4 SITL + bridge (child process) + tlog relay + MAVSDK + MJPEG camera + detector + planner."""
-    with open_px4_sitl(mission, out_dir) as sim:
+    """PX4 SITL + bridge (child process) + tlog relay + MAVSDK + MJPEG camera + detector + planner;
+    `limits`: the controller's, which the vehicle's own are made from."""
+    with open_px4_sitl(mission, out_dir, limits) as sim:
         yield simulated_mavlink_kit(mission, models, sim)
 
 
 @contextmanager
-def open_px4_sitl(mission: Mission, out_dir: Path) -> Iterator[SimulatedVehicle]:
-    """PX4 SITL and the bridge (a child process), the .tlog relay, MAVSDK and the MJPEG camera."""
+def open_px4_sitl(
+    mission: Mission, out_dir: Path, limits: SafetyLimits | None = None
+) -> Iterator[SimulatedVehicle]:
+    """PX4 SITL and the bridge (a child process), the .tlog relay, MAVSDK and the MJPEG camera; PX4
+    holding limits made from the controller's."""
     out_dir.mkdir(parents=True, exist_ok=True)
     system_id = new_system_id()  # this run's PX4, and no other
     with ExitStack() as stack:
         instance = stack.enter_context(px4_instance(mission.px4.instance))
-        config = px4_sim_config(mission, instance, out_dir, system_id)
-        mavsdk_port = MAVSDK_PORT_BASE + instance
-        # The relay takes PX4's offboard port first: a port in use fails the run before PX4 starts.
+        mavsdk_port = free_port("udp")
+        # The relay binds first (a free port): PX4's link sends there.
         tlog = stack.enter_context(
             MavlinkRelay(
-                OFFBOARD_PORT_BASE + instance,
+                0,
                 mavsdk_port,
                 out_dir / TLOG_NAME,
                 faults=mission.faults.link_faults(),
                 vehicle_system_id=system_id,
             )
         )
+        vehicle_limits = vehicle_limits_for(limits)
+        config = px4_sim_config(mission, instance, out_dir, system_id, tlog.listen_address[1], vehicle_limits)
         sim = stack.enter_context(
             SimulatorProcess(
                 "sim_world.px4_bridge",
@@ -122,11 +144,14 @@ def open_px4_sitl(mission: Mission, out_dir: Path) -> Iterator[SimulatedVehicle]
                 "px4_clock_offset_s": PX4_CLOCK_OFFSET_US / 1e6,
                 "speed": mission.px4.speed,
                 "ports": {
-                    "px4_simulator_tcp": 4560 + instance,
-                    "px4_offboard_udp": OFFBOARD_PORT_BASE + instance,
+                    "px4_simulator_tcp": sim.ready.get("simulator_tcp"),
+                    "px4_mavlink_udp": sim.ready.get("px4_mavlink_udp"),
+                    "tlog_relay_udp": tlog.listen_address[1],
                     "mavsdk_udp": mavsdk_port,
-                    "video_http": VIDEO_PORT_BASE + instance,
+                    "video_http": sim.ready["video_url"],
                 },
+                "mavlink_signing": "none (PX4 v1.15 cannot sign); the relay takes only this PX4",
+                "vehicle_limits": config.params,
                 "simulator_pid": sim.pid,
                 "px4_pid": sim.ready.get("px4_pid"),
             },

@@ -3,9 +3,11 @@
 The backend follows the vehicle's autopilot (`mission.autopilot`; "auto": its HEARTBEAT says):
 MAVSDK for PX4, the GUIDED-mode backend for ArduPilot (`flight.autopilots.MavlinkVehicle`).
 
-For a `udpin://` URL the .tlog relay takes the URL's port and MAVSDK listens behind it
-(`REAL_CLIENT_PORT_SHIFT` higher); other links are flown without a .tlog. Nothing here
-imports the simulator: a real-vehicle mission loads no `sim_world` module and no PyBullet.
+For a `udpin://` URL the .tlog relay takes the URL's host and port and MAVSDK listens behind it on a
+free loopback port (`flight.relay.relay_in_front`); with a signing key (`--signing-key FILE`, a vehicle
+set up with that key) the relay signs for MAVSDK and passes on only what the vehicle signed. Other
+links are flown without a .tlog, and cannot be signed. Nothing here imports the simulator: a
+real-vehicle mission loads no `sim_world` module and no PyBullet.
 """
 
 from __future__ import annotations
@@ -24,22 +26,27 @@ from controller.missions.kits.base import (
     planner_for,
 )
 from controller.missions.schema import Mission
+from drone_inspect_core.signing import SigningKey
 from flight.autopilots import MavlinkVehicle
 from flight.link_faults import LinkFaults
-from flight.relay import MavlinkRelay
-from flight.urls import udpin_address
+from flight.relay import relay_in_front
 from perception.stream_camera import StreamCamera
 
 log = logging.getLogger(__name__)
 
-REAL_CLIENT_PORT_SHIFT = 1000
-
 
 @contextmanager
-def open_real_kit(mission: Mission, out_dir: Path, models: LoadedModels | None = None) -> Iterator[FlightKit]:
+def open_real_kit(
+    mission: Mission,
+    out_dir: Path,
+    models: LoadedModels | None = None,
+    signing_key: SigningKey | None = None,
+) -> Iterator[FlightKit]:
     """A vehicle at `mission.vehicle` and its camera stream; no truth. Fails fast on a bad URL."""
     faults = mission.faults.link_faults()
-    with open_real_vehicle(mission.vehicle, mission.camera, out_dir, mission.autopilot, faults) as opened:
+    with open_real_vehicle(
+        mission.vehicle, mission.camera, out_dir, mission.autopilot, faults, signing_key
+    ) as opened:
         frame = opened.camera.read()
         yield FlightKit(
             vehicle=opened.vehicle,
@@ -60,23 +67,14 @@ def open_real_vehicle(
     out_dir: Path,
     autopilot: str = "auto",
     faults: LinkFaults | None = None,
+    signing_key: SigningKey | None = None,
 ) -> Iterator[OpenedVehicle]:
-    """The vehicle at `vehicle_url` (behind the .tlog relay for a udpin:// link; its autopilot's backend,
-    `flight.autopilots.MavlinkVehicle`) and the camera stream."""
+    """The vehicle at `vehicle_url` (behind the .tlog relay for a udpin:// link, which signs with
+    `signing_key`; its autopilot's backend, `flight.autopilots.MavlinkVehicle`) and the camera stream."""
     with ExitStack() as stack:
-        url = vehicle_url
-        tlog = None
-        address = udpin_address(url)
-        if address is not None:
-            # The relay takes the vehicle's port on the host the URL names, and locks onto the first
-            # autopilot heard there; MAVSDK listens behind it on loopback, REAL_CLIENT_PORT_SHIFT higher.
-            host, port = address
-            relay = MavlinkRelay(
-                port, port + REAL_CLIENT_PORT_SHIFT, out_dir / TLOG_NAME, listen_host=host, faults=faults
-            )
-            tlog = stack.enter_context(relay)
-            url = f"udpin://127.0.0.1:{port + REAL_CLIENT_PORT_SHIFT}"
-        else:
+        relay, url = relay_in_front(vehicle_url, out_dir / TLOG_NAME, faults, signing_key)
+        tlog = None if relay is None else stack.enter_context(relay)
+        if relay is None:
             log.warning("%s is not a udpin:// link: flying without a .tlog", url)
         vehicle = stack.enter_context(MavlinkVehicle(url, autopilot, shown_url=vehicle_url))
         camera = stack.enter_context(StreamCamera(camera_url, timeout_s=3.0, open_timeout_s=10.0))
@@ -85,5 +83,6 @@ def open_real_vehicle(
             "autopilot": autopilot,
             "vehicle": vehicle_url,
             "camera": camera_url,
+            "mavlink_signing": "the vehicle's key (--signing-key)" if signing_key else "off",
         }
         yield OpenedVehicle(vehicle, camera, info, tlog)

@@ -8,12 +8,18 @@ forwards to MAVSDK. Ports (`mission.ports`): "auto" (the default) takes free one
 (the relay and the sim bind port 0 and say which they got; MAVSDK gets a port the kernel picks),
 so any number of missions fly at once; fixed ones (the sim binds UDP `p`, the relay `p+1`, MAVSDK
 `p+2`, video HTTP `ports.http`) are checked free before anything starts, naming the one taken.
+
+The link is signed (MAVLink 2 signing) with a key made for the run: the sim-vehicle obeys nothing
+unsigned, and the relay signs for MAVSDK (which cannot) and passes on only what the vehicle signed.
+The key reaches the sim-vehicle through its stdin, never a file. The vehicle holds its own limits,
+a little wider than the controller's (`vehicle_limits_for`), whatever a client asks.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
+from dataclasses import asdict
 from pathlib import Path
 
 from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, OpenedVehicle
@@ -24,25 +30,36 @@ from controller.missions.kits.simulated import (
     new_system_id,
     simulated_mavlink_kit,
     simulated_world_fields,
+    vehicle_limits_for,
 )
 from controller.missions.schema import Mission
-from drone_inspect_core.world_options import StartPose
 from controller.missions.setup import start_offset_for
 from drone_inspect_core.ports import check_free, free_port
+from drone_inspect_core.signing import SigningKey
+from drone_inspect_core.vehicle_limits import VehicleLimits
+from drone_inspect_core.world_options import StartPose
 from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
+from flight.safety import SafetyLimits
 from flight.sim_launcher import SimulatorProcess
 from perception.stream_camera import StreamCamera
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.serve import READY_PREFIX as SIM_READY_PREFIX
-from sim_world.vehicle.serve import SimVehicleRun
+from sim_world.vehicle.serve import SimVehicleRun, secret_json
 
 READY_TIMEOUT_S = 60.0
 
 
-def sim_vehicle_run(mission: Mission, start: StartPose, system_id: int, relay_port: int) -> SimVehicleRun:
+def sim_vehicle_run(
+    mission: Mission,
+    start: StartPose,
+    system_id: int,
+    relay_port: int,
+    signing_key: SigningKey | None = None,
+    limits: VehicleLimits | None = None,
+) -> SimVehicleRun:
     """The sim-vehicle for a mission: `mission.sim_speed`, PX4's boot rules, landed below the start pose,
-    streaming to the relay on `relay_port`."""
+    streaming to the relay on `relay_port`, signing with `signing_key`, holding `limits`."""
     ports = mission.ports
     vehicle = SimVehicleConfig(
         speed=mission.sim_speed,
@@ -52,6 +69,8 @@ def sim_vehicle_run(mission: Mission, start: StartPose, system_id: int, relay_po
         adopt_client=False,  # telemetry to the relay (the controller) only
         video_port=0 if ports.http == "auto" else ports.http,
         video_fps=15.0,
+        signing_key=signing_key,
+        limits=limits or VehicleLimits(),
     )
     return SimVehicleRun(
         vehicle=vehicle,
@@ -62,19 +81,24 @@ def sim_vehicle_run(mission: Mission, start: StartPose, system_id: int, relay_po
 
 @contextmanager
 def open_sim_mavlink_kit(
-    mission: Mission, out_dir: Path, models: LoadedModels | None = None
+    mission: Mission, out_dir: Path, models: LoadedModels | None = None, limits: SafetyLimits | None = None
 ) -> Iterator[FlightKit]:
-    """sim-vehicle subprocess + tlog relay + MAVSDK + MJPEG stream camera + detector + planner."""
-    with open_sim_mavlink(mission, out_dir) as sim:
+    """sim-vehicle subprocess + tlog relay + MAVSDK + MJPEG stream camera + detector + planner;
+    `limits`: the controller's, which the vehicle's own are made from."""
+    with open_sim_mavlink(mission, out_dir, limits) as sim:
         yield simulated_mavlink_kit(mission, models, sim)
 
 
 @contextmanager
-def open_sim_mavlink(mission: Mission, out_dir: Path) -> Iterator[SimulatedVehicle]:
-    """The mission's sim-vehicle (a subprocess), the .tlog relay, MAVSDK and the MJPEG stream camera."""
+def open_sim_mavlink(
+    mission: Mission, out_dir: Path, limits: SafetyLimits | None = None
+) -> Iterator[SimulatedVehicle]:
+    """The mission's sim-vehicle (a subprocess), the .tlog relay, MAVSDK and the MJPEG stream camera; the
+    link signed with a key made for the run, the vehicle holding limits made from the controller's."""
     start = start_offset_for(mission, SIM_HFOV_DEG, SIM_HFOV_DEG)  # square image
     out_dir.mkdir(parents=True, exist_ok=True)
     system_id = new_system_id()
+    key = SigningKey.generate()  # this run's link, and no other
     p, http = mission.ports.mavlink_udp, mission.ports.http
     if p == "auto":
         relay_port, mavsdk_port = 0, free_port("udp")
@@ -92,13 +116,15 @@ def open_sim_mavlink(mission: Mission, out_dir: Path) -> Iterator[SimulatedVehic
                 out_dir / TLOG_NAME,
                 faults=mission.faults.link_faults(),
                 vehicle_system_id=system_id,
+                signing_key=key,
             )
         )
-        run = sim_vehicle_run(mission, start, system_id, tlog.listen_address[1])
+        vehicle_limits = vehicle_limits_for(limits)
+        run = sim_vehicle_run(mission, start, system_id, tlog.listen_address[1], key, vehicle_limits)
         sim = stack.enter_context(
             SimulatorProcess(
                 "sim_world.vehicle", run, out_dir / "sim_vehicle.log", SIM_READY_PREFIX,
-                start_timeout_s=READY_TIMEOUT_S, name="sim-vehicle",
+                start_timeout_s=READY_TIMEOUT_S, name="sim-vehicle", secrets=secret_json(run),
             )
         )  # fmt: skip
         truth = SimTruth(sim.ready["truth_url"])
@@ -124,6 +150,8 @@ def open_sim_mavlink(mission: Mission, out_dir: Path) -> Iterator[SimulatedVehic
                 },
                 "tlog": "recorded by flight.relay between sim-vehicle and MAVSDK",
                 "system_id": system_id,
+                "mavlink_signing": "a key made for this run (the relay signs for MAVSDK)",
+                "vehicle_limits": asdict(vehicle_limits),
                 "sim_speed": mission.sim_speed,
                 "simulator_pid": sim.pid,
             },

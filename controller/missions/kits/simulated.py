@@ -23,9 +23,11 @@ from controller.missions.kits.base import (
     planner_for,
 )
 from controller.missions.schema import Mission
-from drone_inspect_core.world_options import StartPose
 from controller.missions.setup import scene_config_for, wind_config_for
+from drone_inspect_core.vehicle_limits import VehicleLimits
 from drone_inspect_core.vocabulary import colour_name
+from drone_inspect_core.world_options import StartPose
+from flight.safety import SafetyLimits
 from sim_world.rendering.camera import CameraConfig
 from sim_world.scene.config import SceneConfig
 from sim_world.scene.sampling import sample_scene
@@ -177,4 +179,18 @@ def simulated_mavlink_kit(mission: Mission, models: LoadedModels | None, sim: Si
         },
         tlog=sim.opened.tlog,
         image_width_px=SIM_IMAGE_PX,
+    )
+
+
+def vehicle_limits_for(limits: SafetyLimits | None) -> VehicleLimits:
+    """What a vehicle we start holds by itself: a little wider than the controller's own limits, so
+    it never cuts short what the controller may do and stops what it may not."""
+    limits = limits or SafetyLimits()
+    fence = limits.geofence
+    return VehicleLimits.around(
+        limits.max_horizontal_speed_m_s,
+        limits.max_vertical_speed_m_s,
+        limits.max_yaw_rate_deg_s,
+        None if fence is None else (fence.half_width_north_m, fence.half_width_east_m),
+        None if fence is None else fence.max_up_m,
     )

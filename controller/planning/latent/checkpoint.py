@@ -19,12 +19,13 @@ from typing import Any
 
 import torch
 from safetensors import SafetensorError, safe_open
-from safetensors.torch import load_file, save_file
+from safetensors.torch import load_file, save
 
 from controller.planning.latent.config import GOAL_PROTOTYPE_RULE, ModelConfig
 from controller.planning.latent.errors import PlannerCheckpointError
 from controller.planning.latent.model import LatentDynamicsModel
 from controller.planning.latent.tokenizer import VOCAB_FILE, InstructionTokenizer
+from drone_inspect_core.files import write_atomic, write_json_atomic
 
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
@@ -75,11 +76,13 @@ def save_checkpoint(
     tensors[GOAL_KEY] = goal
     tensors[PROBE_KEY] = probe_distances(model, tokenizer, goal).contiguous()
     metadata = {"format": FORMAT, "image_size": str(model.config.image_size)}
-    save_file(tensors, str(folder / WEIGHTS_FILE), metadata=metadata)
+    # Each file through a temporary one and a rename: a save that fails (a full disk) leaves the last
+    # whole checkpoint, never a truncated one looking whole.
+    write_atomic(folder / WEIGHTS_FILE, save(tensors, metadata=metadata))
     tokenizer.save(folder)
     body = {"format": FORMAT, "model": model.config.to_dict(), "goal_prototype": GOAL_PROTOTYPE_RULE}
     body.update(meta or {})
-    (folder / CONFIG_FILE).write_text(json.dumps(body, indent=2, sort_keys=False) + "\n")
+    write_json_atomic(folder / CONFIG_FILE, body)
 
 
 def load_checkpoint(folder: Path) -> LoadedCheckpoint:

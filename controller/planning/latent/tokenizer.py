@@ -21,6 +21,7 @@ from tokenizers import Tokenizer, decoders, normalizers, pre_tokenizers, process
 from tokenizers.models import WordPiece
 
 from controller.planning.latent.errors import InstructionError, PlannerCheckpointError
+from drone_inspect_core.files import write_atomic, write_json_atomic
 
 SPECIAL_TOKENS: tuple[str, ...] = ("[PAD]", "[UNK]", "[CLS]", "[SEP]", "[MASK]")
 PAD_ID = 0
@@ -106,8 +107,8 @@ class InstructionTokenizer:
         """Write `vocab.txt` (ids in order) and the full `tokenizer.json` into `folder`."""
         vocab = self._tok.get_vocab()
         ordered = sorted(vocab, key=vocab.__getitem__)
-        (folder / VOCAB_FILE).write_text("\n".join(ordered) + "\n", encoding="utf-8")
-        (folder / TOKENIZER_FILE).write_text(json.dumps(json.loads(self._tok.to_str()), indent=1))
+        write_atomic(folder / VOCAB_FILE, "\n".join(ordered) + "\n")
+        write_json_atomic(folder / TOKENIZER_FILE, json.loads(self._tok.to_str()), indent=1)
 
     @property
     def vocab_size(self) -> int:
