@@ -57,15 +57,20 @@ def test_a_bad_option_is_one_line(capsys: pytest.CaptureFixture[str], argv: list
 def test_an_error_no_command_caught_is_one_line_and_debug_shows_where(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
+    missing = tmp_path / "nothing"
+    argv = ["train", "--data", str(missing), "--out", str(tmp_path / "run"), "--epochs", "1"]
+    code, err = run(capsys, *argv)
+    assert code == 1 and len(err) == 1 and err[0].startswith("dronectl train: ") and str(missing) in err[0]
+    code, debug_err = run(capsys, "--debug", *argv)
+    assert code == 1 and debug_err[0] == "Traceback (most recent call last):" and debug_err[-1] == err[0]
+
+
+def test_a_command_that_names_its_own_errors_says_them_in_one_line(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
     argv = ["evaluate", "--model", str(tmp_path / "nothing"), "--data", str(tmp_path / "nothing")]
     code, err = run(capsys, *argv)
     assert code == 1 and err == [f"dronectl evaluate: checkpoint folder not found: {tmp_path / 'nothing'}"]
-    code, err = run(capsys, "--debug", *argv)
-    assert (
-        code == 1
-        and err[0] == "Traceback (most recent call last):"
-        and err[-1] == (f"dronectl evaluate: checkpoint folder not found: {tmp_path / 'nothing'}")
-    )
 
 
 def test_training_on_a_bad_dataset_leaves_no_run_folder(

@@ -10,11 +10,11 @@ from __future__ import annotations
 import time
 
 import pytest
-from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 
 from drone_inspect_core.ports import free_port
 from drone_inspect_core.signing import SigningKey
 from flight.errors import LinkLostError
+from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 from flight.relay import MavlinkRelay
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import flight_guard

@@ -95,7 +95,7 @@ def test_a_file_without_words_for_a_kind_is_one_line(tmp_path: Path, capsys) -> 
     for instructions in (partial, phrases):
         code = evaluate_cmd.main(["--model", model, "--data", str(data), "--instructions", str(instructions)])
         err = capsys.readouterr().err.strip()
-        assert code == 2 and "\n" not in err and "Traceback" not in err, err
+        assert code == 1 and "\n" not in err and "Traceback" not in err, err
         assert str(instructions) in err and "'valve'" in err, err
     with pytest.raises(InstructionError, match="field 'templates'"):
         words["templates"] = ["no slot here"]

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from controller.planning.actions import ALL_ACTIONS
 from drone_inspect_core.files import write_json_atomic
-from dronectl.options import CommandParser, at_least, new_file, seed_value
+from dronectl.options import CommandParser, at_least, new_file, say_error, seed_value
 
 if TYPE_CHECKING:
     from controller.evaluation.evaluate import EvalResult
@@ -77,8 +76,8 @@ def main(argv: list[str]) -> int:
             (args.mirror_tta,), flown=args.as_flown,
         )  # fmt: skip
     except (LatentError, DatasetError) as exc:  # a bad checkpoint, dataset or instruction file
-        print(f"dronectl evaluate: {exc}", file=sys.stderr)
-        return 2
+        say_error("dronectl evaluate", str(exc))
+        return 1
     for result in results:
         _print_result(result, detailed=result is results[0])
     if args.latency > 0:
