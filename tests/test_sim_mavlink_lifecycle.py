@@ -61,7 +61,7 @@ def test_sigterm_lands_finishes_the_report_and_stops_the_sim_vehicle(tmp_path: P
     report = _until_first_step(process, out)
     process.send_signal(signal.SIGTERM)
     output = process.communicate(timeout=60)[0]
-    assert process.returncode == 130, output
+    assert process.returncode == 143, output  # SIGTERM: 128 + 15
     final = json.loads((out / "report.json").read_text())
     assert final["status"] == "finished" and "stopped by SIGTERM" in final["error"]
     assert not wait_gone(report["setup"]["simulator_pid"], within_s=5.0)
