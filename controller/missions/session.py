@@ -40,6 +40,7 @@ in the report and stops, never the flight.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -61,13 +62,14 @@ from controller.planning.grounding import TargetQuery, understand
 from controller.planning.loop import CentringLoop
 from controller.planning.loop_records import CentringConfig, Outcome, StepRecord
 from drone_inspect_core.centring import default_epsilon_px
+from drone_inspect_core.frames import world_ned_to_heading
 from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.vocabulary import Vocabulary
-from flight.moves import take_off_to_start
+from flight.moves import fly_offset, take_off_to_start
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, safe_stop
 from flight.signals import StopRequested
-from flight.types import Telemetry, VelocityBody
+from flight.types import PositionNed, Telemetry, VelocityBody
 
 log = logging.getLogger(__name__)
 
@@ -184,6 +186,8 @@ class FlightSession:
         self._clock: dict[str, float] = {}
         self.vehicle_start_s: float | None = None  # vehicle clock, after the first take-off
         self.vehicle_end_s: float | None = None  # vehicle clock, when the last centring ended
+        self.start_position: PositionNed | None = None
+        """Where the first take-off left the vehicle (local NED): where `return_to_start` looks again."""
         self._last_telemetry: Telemetry | None = None
         self._wall_start = time.perf_counter()
         self.result: MissionResult | None = None
@@ -385,6 +389,7 @@ class FlightSession:
                 self._offboard = True
                 if self.vehicle_start_s is None:
                     self.vehicle_start_s = self._safe.time_s()
+                    self.start_position = self._safe.telemetry().position_ned
                 if self._interrupt is None:
                     self._phase = Phase.HOLDING
             except BaseException as exc:
@@ -454,6 +459,9 @@ class FlightSession:
                 vehicle.start_offboard()
                 self._offboard = True
             result = loop.run()
+            if result.outcome is Outcome.TARGET_NOT_FOUND and self._back_to_start(vehicle, config):
+                self.writer.instructions[-1]["returned_to_start"] = True
+                result = loop.run()  # the same loop, its records going on: look again from the start
             outcome, message = result.outcome, result.message
             if self._interrupt is None:
                 self._phase = Phase.HOLDING
@@ -473,6 +481,30 @@ class FlightSession:
             self.flown_entries.append(entry)
             self.writer.end_instruction(judged.summary())
         return judged
+
+    def _back_to_start(self, vehicle: StoppableVehicle, config: CentringConfig) -> bool:
+        """An instruction's target not in view where the vehicle holds: fly back across the wall to where
+        the flight started (the pose after take-off; its distance from the wall kept), from where the
+        operator's view was set up, to look there (`Mission.return_to_start`). False where it is there
+        already, or the mission says not to."""
+        start = self.start_position
+        if not self.mission.return_to_start or start is None:
+            return False
+        telemetry = self._safe.telemetry()
+        here = telemetry.position_ned
+        _, right_m = world_ned_to_heading(
+            start.north_m - here.north_m, start.east_m - here.east_m, math.radians(telemetry.attitude.yaw_deg)
+        )
+        up_m = here.down_m - start.down_m
+        if max(abs(right_m), abs(up_m)) < config.min_move_m:
+            return False
+        log.info(
+            "the target is not in view here: back to the start (%.2f m right, %.2f m up) to look again",
+            right_m,
+            up_m,
+        )
+        fly_offset(vehicle, right_m, up_m, config.speed_m_s, config.settle_speed_m_s, config.settle_timeout_s)
+        return True
 
     def fly(self, instructions: Sequence[MissionInstruction] | None = None) -> None:
         """The mission's flight: take off, centre each instruction in turn (`instructions`, default the
