@@ -216,8 +216,8 @@ def sequence_for(mission: Mission, config: BenchmarkConfig) -> dict[str, Any] | 
     distance_m = max(float(rng.uniform(*config.distance_m)), need_m)
     if distance_m > SEQUENCE_MAX_DISTANCE_M:
         return None
-    slack_e = SEQUENCE_VIEW * tan_half * distance_m - half_e  # metres the group may sit off the centre
-    slack_u = SEQUENCE_VIEW * tan_half * distance_m - half_u
+    slack_e = max(0.0, SEQUENCE_VIEW * tan_half * distance_m - half_e)  # how far the group may sit off centre
+    slack_u = max(0.0, SEQUENCE_VIEW * tan_half * distance_m - half_u)
     named = targets[0]
     start = {
         "right_m": middle_east - named.east_m + float(rng.uniform(-slack_e, slack_e)),
