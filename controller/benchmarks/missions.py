@@ -209,6 +209,7 @@ def per_instruction(results: list[MissionResult], config: BenchmarkConfig) -> di
         "centred": sum(entry["passed"] for entry in flown),
         "wrong_target": sum(entry["wrong_target"] for entry in flown),
         "not_found": sum(entry["outcome"] == "target_not_found" for entry in flown),
+        "returned_to_start": sum(entry.get("returned_to_start", False) for entry in flown),
         "flights_all_centred": sum(
             len(r.instructions) == n and all(e["passed"] for e in r.instructions) for r in results
         ),
@@ -340,7 +341,8 @@ def _per_instruction_line(planner: str, counts: dict[str, Any]) -> str:
     return (
         f"{planner} per instruction: {counts['centred']}/{n} centred "
         f"({100 * counts['centred'] / n if n else 0:.1f}%), {counts['wrong_target']} wrong target, "
-        f"{counts['not_found']} not found; by place in the flight {by_place}; "
+        f"{counts['not_found']} not found, {counts.get('returned_to_start', 0)} looked for again from the "
+        f"start; by place in the flight {by_place}; "
         f"{counts['flights_all_centred']} flights with every instruction centred"
     )
 

@@ -39,6 +39,7 @@ def judge_instruction(
     error: str | None,
     wall_s: float,
     vehicle_s: float,
+    returned_to_start: bool = False,
 ) -> InstructionResult:
     """One instruction's result: its loop's `steps` and `outcome`, judged (see the module docstring)."""
     kit, epsilon_px = session.kit, session.epsilon_px
@@ -75,6 +76,7 @@ def judge_instruction(
         vehicle_s=round(vehicle_s, 3),
         wall_s=round(wall_s, 3),
         error=error,
+        returned_to_start=returned_to_start,
         records=tuple(steps),
     )
 

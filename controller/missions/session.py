@@ -452,7 +452,7 @@ class FlightSession:
         loop.on_step = self._step_callback(on_step)
         self._phase = Phase.CENTRING
         wall_start, vehicle_start_s = time.perf_counter(), self._safe.time_s()
-        outcome, message, error = Outcome.ABORTED, "", None
+        outcome, message, error, returned = Outcome.ABORTED, "", None, False
         try:
             if not self._offboard:  # after an operator's hold: back into offboard from a zero setpoint
                 vehicle.set_velocity_body(VelocityBody())
@@ -460,7 +460,7 @@ class FlightSession:
                 self._offboard = True
             result = loop.run()
             if result.outcome is Outcome.TARGET_NOT_FOUND and self._back_to_start(vehicle, config):
-                self.writer.instructions[-1]["returned_to_start"] = True
+                returned = True
                 result = loop.run()  # the same loop, its records going on: look again from the start
             outcome, message = result.outcome, result.message
             if self._interrupt is None:
@@ -476,6 +476,7 @@ class FlightSession:
             judged = judge_instruction(
                 self, index, entry, query, loop.steps, outcome, message, error,
                 wall_s=time.perf_counter() - wall_start, vehicle_s=self.vehicle_end_s - vehicle_start_s,
+                returned_to_start=returned,
             )  # fmt: skip
             self._results.append(judged)
             self.flown_entries.append(entry)
