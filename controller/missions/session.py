@@ -55,16 +55,15 @@ from controller.missions.flight_results import finish_flight, judge_instruction
 from controller.missions.interrupts import OperatorStop, StoppableVehicle
 from controller.missions.kits import open_kit
 from controller.missions.kits.base import FlightKit, LoadedModels
+from controller.missions.loop_setup import epsilon_for, loop_config, mission_vocabulary
 from controller.missions.report import ReportWriter
 from controller.missions.results import InstructionResult, MissionResult
 from controller.missions.schema import Mission, MissionInstruction
 from controller.planning.grounding import TargetQuery, understand
 from controller.planning.loop import CentringLoop
 from controller.planning.loop_records import CentringConfig, Outcome, StepRecord
-from drone_inspect_core.centring import default_epsilon_px
 from drone_inspect_core.frames import world_ned_to_heading
 from drone_inspect_core.signing import SigningKey
-from drone_inspect_core.vocabulary import Vocabulary
 from flight.moves import fly_offset, take_off_to_start
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, safe_stop
@@ -73,9 +72,6 @@ from flight.types import PositionNed, Telemetry, VelocityBody
 
 log = logging.getLogger(__name__)
 
-FAST_SIM_FRESH_FRAME_S = 0.1
-"""A sim-vehicle off real time: a frame must arrive this long after an observation begins (render,
-JPEG and HTTP take a few tens of ms of wall time, which at ×8 are a few tenths of a simulated second)."""
 INTERRUPT_WAIT_S = 30.0
 """How long an interrupt on a simulated-clock vehicle waits for the running operation to stop (it stops
 at its next vehicle call; a camera read or a detection can delay that a little)."""
@@ -101,44 +97,6 @@ class Phase(str, Enum):
 class SessionError(RuntimeError):
     """An operation the session cannot do now: another one runs, or the vehicle is not where it must be
     (centre before take-off, take off after a kill, anything after the session closed)."""
-
-
-def epsilon_for(mission: Mission, kit: FlightKit) -> float:
-    """ε for this flight: the kit's (tests fix it), else the mission's, else the default for the width."""
-    return kit.epsilon_px or mission.epsilon_px or default_epsilon_px(kit.image_width_px)
-
-
-def mission_vocabulary(mission: Mission) -> Vocabulary:
-    """The words of a mission: the shipped ones, the kinds of its scene (a file's too, for a simulated
-    vehicle) and of the mission itself, and its glossary."""
-    if mission.is_real:
-        return mission.vocabulary
-    from controller.missions.setup import scene_config_for  # the simulator's scene code: simulated only
-
-    return scene_config_for(mission).vocabulary.with_glossary(mission.glossary_words())
-
-
-def loop_config(
-    mission: Mission,
-    epsilon_px: float,
-    instruction: str,
-    target: TargetQuery | None = None,
-    vocabulary: Vocabulary | None = None,
-) -> CentringConfig:
-    """The loop's configuration for one instruction of `mission`. The instruction is understood here,
-    before anything flies: one the vocabulary cannot act on raises `InstructionRefused` naming its word."""
-    vocabulary = vocabulary or mission_vocabulary(mission)
-    return CentringConfig(
-        **mission.loop.model_dump(),
-        epsilon_px=epsilon_px,
-        instruction=instruction,
-        target=target or understand(instruction, vocabulary),
-        vocabulary=vocabulary,
-        max_steps=mission.max_steps,
-        timeout_s=mission.timeout_s,
-        stop_margin_px=mission.stop_margin_px,
-        **({"fresh_frame_s": FAST_SIM_FRESH_FRAME_S} if mission.sim_speed != 1.0 else {}),
-    )
 
 
 class FlightSession:
