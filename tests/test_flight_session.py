@@ -207,3 +207,24 @@ def test_a_target_out_of_view_where_the_vehicle_holds_is_looked_for_again_from_t
         "centred",
         "target_not_found",
     ] and not result.passed
+
+
+def test_a_last_step_without_truth_is_judged_on_the_truth_read_when_the_loop_ended(tmp_path: Path) -> None:
+    """A simulator's /truth.json that times out at the last step (under load) costs no centred instruction;
+    with no truth at all the instruction cannot pass."""
+    vehicle, detector = started()
+    mission = parse_mission(
+        {"name": "m", "planner": "classic", "instructions": ["the gauge", "the red valve"]}
+    )
+    kit = kit_for(vehicle, detector)
+    kit.truth_probe = lambda: None  # every step's truth lost; the truth of every target still answers
+    result = fly_kit(kit, mission, tmp_path / "a", LIMITS)
+    assert result.passed, result.failures
+    assert all(i["final_truth_error_px"] <= EPSILON for i in result.instructions)
+    vehicle, detector = started()
+    kit = kit_for(vehicle, detector)
+    kit.truth_probe, kit.targets_truth = (lambda: None), (lambda: None)
+    result = fly_kit(kit, mission, tmp_path / "b", LIMITS)
+    assert (
+        not result.passed and "target not in view at the end per truth" in result.instructions[0]["failures"]
+    )
