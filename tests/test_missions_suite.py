@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-import itertools
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
-from pymavlink import mavutil
-from pymavlink.dialects.v20 import common as mavlink
 
 from controller.missions.suite import SuiteOptions, format_table, run_suite, write_junit
 
@@ -63,34 +60,3 @@ def test_regression_suite_hil_mission_passes(tmp_path: Path) -> None:
     assert suite.passed, format_table(suite)
     report_dir = Path(suite.results[0].report_dir)
     assert (report_dir / "flight.tlog").stat().st_size > 1000
-
-
-def landed_states(tlog: Path) -> list[int]:
-    """The vehicle's own landed state (EXTENDED_SYS_STATE) through the flight, each change once."""
-    log = mavutil.mavlink_connection(str(tlog))
-    states: list[int] = []
-    while (message := log.recv_match(type="EXTENDED_SYS_STATE")) is not None:
-        if not states or states[-1] != message.landed_state:
-            states.append(message.landed_state)
-    return states
-
-
-@pytest.mark.slow
-@pytest.mark.timeout(300)
-def test_three_instructions_through_sim_mavlink_take_off_once_and_land_once(tmp_path: Path) -> None:
-    """Three instructions, one flight, through MAVSDK, the MJPEG stream and the sim-vehicle's truth: each
-    centred on its own target, and the vehicle's own record (its .tlog) shows one take-off, one landing."""
-    suite = run_suite(
-        REGRESSION, SuiteOptions(report_dir=tmp_path, tags=("sequence",), exclude_tags=("grounding",))
-    )
-    assert [r.name for r in suite.results] == ["hil-three-instructions"]
-    result = suite.results[0]
-    assert result.passed, format_table(suite)
-    assert [i["target"]["kind"] for i in result.instructions] == ["gauge", "valve", "switchbox"]
-    assert all(i["outcome"] == "centred" and not i["wrong_target"] for i in result.instructions)
-    on_ground = mavlink.MAV_LANDED_STATE_ON_GROUND
-    states = landed_states(Path(result.report_dir) / "flight.tlog")
-    assert states[0] == on_ground and states[-1] == on_ground
-    assert (
-        sum(1 for a, b in itertools.pairwise(states) if a == on_ground and b != on_ground) == 1
-    )  # one take-off
