@@ -37,7 +37,8 @@ from controller.missions.report import (
     write_setup_failure,
 )
 from controller.missions.results import MissionResult, count_steps, judge, wrong_target
-from controller.missions.schema import ARDUPILOT_SITL, PX4_SITL, SIM, SIM_MAVLINK, Mission
+from controller.missions.schema import Mission
+from controller.missions.vehicles import ARDUPILOT_SITL, PX4_SITL, SIM, SIM_MAVLINK
 from controller.planning.grounding import TargetQuery, understand
 from controller.planning.loop import CentringLoop
 from controller.planning.loop_records import (

@@ -90,6 +90,7 @@ class ArduPilotState:
         self.home_ok = False
         self.prearm_ok: bool | None = None
         self.battery_percent: float | None = None
+        self.forward_range_m: float | None = None
         self.vehicle_time_s = math.nan
         self.seen: set[str] = set()
         self.texts = StatusTexts()
@@ -130,6 +131,10 @@ class ArduPilotState:
                     self.prearm_ok = bool(msg.onboard_control_sensors_health & bit)
                 if msg.battery_remaining >= 0:
                     self.battery_percent = float(msg.battery_remaining)
+            elif kind == "DISTANCE_SENSOR" and msg.orientation == mavlink.MAV_SENSOR_ROTATION_NONE:
+                # forward only (a downward one measures height); centimetres, in its own range or none
+                in_range = msg.min_distance <= msg.current_distance <= msg.max_distance
+                self.forward_range_m = msg.current_distance / 100.0 if in_range else None
             elif kind == "SYSTEM_TIME":
                 self._clock(msg.time_boot_ms)
             elif kind == "STATUSTEXT":
@@ -163,6 +168,7 @@ class ArduPilotState:
                 flight_mode=flight_mode_of(self.custom_mode),
                 timestamp_s=timestamp_s,
                 battery_remaining_percent=self.battery_percent,
+                forward_range_m=self.forward_range_m,
             )
 
 

@@ -101,7 +101,11 @@ def route_mavsdk_logs() -> None:
 class TelemetryCache:
     """The latest of every telemetry stream the backend reads, stored by MAVSDK's callback thread."""
 
-    def __init__(self, link_timeout_s: float) -> None:
+    def __init__(self, link_timeout_s: float, heartbeat_paced_by_wall: bool = True) -> None:
+        """`heartbeat_paced_by_wall`: False for a simulated autopilot on its own clock (lockstep SITL): its
+        1 Hz heartbeat (simulated time) comes further apart than MAVSDK's 3 s wall-clock timeout whenever the
+        simulation runs slower than a third of real time (a loaded machine), so MAVSDK's "disconnected" is
+        no sign of a lost link there; silence for the link timeout still is."""
         self.lock = threading.Lock()
         self.position: tuple[float, float, float] = _NAN3
         self.velocity: tuple[float, float, float] = _NAN3
@@ -115,7 +119,7 @@ class TelemetryCache:
         self.texts = StatusTexts()
         self.vehicle_time_s = math.nan  # the autopilot's clock, from its ATTITUDE timestamps
         self.forward_range_m: float | None = None
-        self.link = LinkMonitor(link_timeout_s)
+        self.link = LinkMonitor(link_timeout_s, quiet_s=0.5 if heartbeat_paced_by_wall else link_timeout_s)
 
     def subscribe(self, system: Any, tel: MavsdkTelemetry) -> None:
         def store(fn: Callable[[Any], None]) -> Callable[[Any, Any], None]:

@@ -111,7 +111,7 @@ class MavsdkVehicle(Vehicle):
                 "running and sending to this address and port? (PX4 SITL and `dronectl sim-vehicle` send "
                 "to 14540 by default)",
             )
-        self._cache = TelemetryCache(self.config.link_timeout_s)
+        self._cache = TelemetryCache(self.config.link_timeout_s, self.config.clock == "wall")
         # Keep every MAVSDK object referenced for the connection's life: a plugin left to the
         # garbage collector is destroyed with its subscriptions, and telemetry silently stops.
         self._system = system
