@@ -16,11 +16,11 @@ from __future__ import annotations
 
 import math
 import threading
-from collections import deque
 from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from flight.status_texts import StatusTexts
 from flight.types import Attitude, FlightMode, PositionNed, Telemetry, VelocityNed
 
 COPTER_MODES = {
@@ -93,8 +93,7 @@ class ArduPilotState:
         self.forward_range_m: float | None = None
         self.vehicle_time_s = math.nan
         self.seen: set[str] = set()
-        self.texts: deque[str] = deque(maxlen=100)
-        self.texts_received = 0
+        self.texts = StatusTexts()
 
     # ------------------------------------------------------------------ from the reader thread
     def handle(self, msg: Any) -> None:
@@ -139,8 +138,7 @@ class ArduPilotState:
             elif kind == "SYSTEM_TIME":
                 self._clock(msg.time_boot_ms)
             elif kind == "STATUSTEXT":
-                self.texts.append(f"{_severity(msg.severity)}: {msg.text}")
-                self.texts_received += 1
+                self.texts.add(f"{_severity(msg.severity)}: {msg.text}")
 
     def _clock(self, time_boot_ms: int) -> None:
         stamp_s = time_boot_ms * 1e-3
@@ -172,20 +170,6 @@ class ArduPilotState:
                 battery_remaining_percent=self.battery_percent,
                 forward_range_m=self.forward_range_m,
             )
-
-    def all_texts(self) -> list[str]:
-        with self.lock:
-            return list(self.texts)
-
-    def last_text(self) -> str:
-        with self.lock:
-            return self.texts[-1] if self.texts else ""
-
-    def texts_since(self, count: int) -> str:
-        """The texts after the first `count` received, "; "-joined (as many as are still kept)."""
-        with self.lock:
-            new = min(self.texts_received - count, len(self.texts))
-            return "; ".join(list(self.texts)[len(self.texts) - new :]) if new > 0 else ""
 
 
 def _severity(severity: int) -> str:

@@ -11,7 +11,6 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -24,6 +23,7 @@ from mavsdk.plugins.telemetry import Telemetry as MavsdkTelemetry
 
 from flight.link import LinkMonitor
 from flight.safety import FlightTimeouts
+from flight.status_texts import StatusTexts
 from flight.types import Attitude, FlightMode, PositionNed, Telemetry, VelocityNed
 from flight.urls import validate_connection_url
 
@@ -116,8 +116,7 @@ class TelemetryCache:
         self.battery_percent: float | None = None
         self.local_position_ok = False
         self.home_ok = False
-        self.texts: deque[str] = deque(maxlen=100)
-        self.texts_received = 0  # all STATUSTEXTs so far (the deque keeps the latest only)
+        self.texts = StatusTexts()
         self.vehicle_time_s = math.nan  # the autopilot's clock, from its ATTITUDE timestamps
         self.forward_range_m: float | None = None
         self.link = LinkMonitor(link_timeout_s, quiet_s=0.5 if heartbeat_paced_by_wall else link_timeout_s)
@@ -156,8 +155,7 @@ class TelemetryCache:
             self.forward_range_m = float(current) if in_range else None
 
         def status_text(d: Any) -> None:
-            self.texts.append(f"{d.type.name}: {d.text}")
-            self.texts_received += 1
+            self.texts.add(f"{d.type.name}: {d.text}")
 
         tel.subscribe_position_velocity_ned(store(pos_vel))
         tel.subscribe_attitude_euler(store(attitude))
@@ -186,16 +184,3 @@ class TelemetryCache:
                 forward_range_m=self.forward_range_m,
             )
 
-    def all_texts(self) -> list[str]:
-        with self.lock:
-            return list(self.texts)
-
-    def last_text(self) -> str:
-        with self.lock:
-            return self.texts[-1] if self.texts else ""
-
-    def texts_since(self, count: int) -> str:
-        """The texts after the first `count` received, "; "-joined (as many as are still kept)."""
-        with self.lock:
-            new = min(self.texts_received - count, len(self.texts))
-            return "; ".join(list(self.texts)[len(self.texts) - new :]) if new > 0 else ""
