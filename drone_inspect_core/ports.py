@@ -34,6 +34,15 @@ GCS_UDP = 14550
 SIM_VEHICLE_VIDEO_HTTP = 8080
 """`dronectl sim-vehicle` / `px4-sim` serve MJPEG on 8080 + N when run by hand (a camera-like port)."""
 
+# ArduPilot SITL, instance N (ArduPilot adds ARDUPILOT_PORT_STRIDE · N to each).
+ARDUPILOT_PORT_STRIDE = 10
+ARDUPILOT_JSON_UDP = 9002
+"""ArduPilot sends its JSON physics frames here (the bridge listens)."""
+ARDUPILOT_MAVLINK = 5760
+"""ArduPilot's SERIAL0 port number; here the UDP port it sends its MAVLink to."""
+ARDUPILOT_VIDEO_HTTP = 8090
+"""`dronectl ardupilot-sim` serves MJPEG on 8090 + N when run by hand, beside px4-sim's 8080 + N."""
+
 
 class PortInUseError(OSError):
     """A port a run needs is held by another program; the message names it."""

@@ -1,4 +1,4 @@
-"""sim_world: the simulated world (PyBullet), the simulated vehicle, the PX4 bridge.
+"""sim_world: the simulated world (PyBullet), the simulated vehicle, the PX4 and ArduPilot bridges.
 
 The only package that imports PyBullet. PyBullet's C library prints its build time on stderr when it
 loads ("pybullet build time: ..."), before any message of ours: the first import of this package

@@ -3,7 +3,8 @@ only the simulator imports PyBullet and only flight/mavsdk imports mavsdk, `flig
 simulator only in its PyBullet backend, what flies never imports the research rooms (training,
 evaluation, benchmarks), no import cycles, no two types of one name, and a real-vehicle mission loads
 no simulator and no research module at all. A file over 400 lines is a warning for review, not a
-failure: files split by concern, never by count.
+failure: files split by concern, never by count. And docs/architecture.md, the map of it all, names
+every module by its path, and every path, dotted module name and class it names exists.
 
 The layers (docs/architecture.md): tools → controller → (perception, flight) → sim_world → core, where
 `controller.planning` (deciding) never imports `controller.missions` (flying, reporting), and
@@ -14,10 +15,12 @@ from __future__ import annotations
 
 import ast
 import json
+import re
 import subprocess
 import sys
 import warnings
 from collections import defaultdict
+from functools import cache
 from pathlib import Path
 
 import cv2
@@ -122,6 +125,20 @@ def test_what_flies_never_imports_the_research_rooms() -> None:
     assert not wrong, "\n".join(wrong)
 
 
+def test_training_evaluation_reproduction_plots_and_benchmarks_live_in_the_research_rooms() -> None:
+    """A module named for research work (training, evaluation, reproduction, plots, benchmarks) outside
+    the rooms would fly with the product; the command line (`dronectl`) only calls into the rooms."""
+    words = ("train", "evaluat", "reproduc", "plot", "bench")
+    strays = [
+        m
+        for m in MODULES
+        if m.split(".")[0] != "dronectl" and not is_research(m)
+        and any(word in part for part in m.split(".")[1:] for word in words)
+    ]  # fmt: skip
+    assert not strays, strays
+    assert all(is_research(m) for m in ("controller.evaluation.reproduce", "controller.evaluation.plots"))
+
+
 def test_only_core_onnx_runtime_imports_onnxruntime() -> None:
     users = [m for m, p in MODULES.items() if any(i.split(".")[0] == "onnxruntime" for i in _imports(p, m))]
     assert users == ["drone_inspect_core.onnx_runtime"], users
@@ -193,3 +210,71 @@ def test_a_real_vehicle_mission_loads_no_simulator_and_no_pybullet(tmp_path: Pat
     assert "pybullet" not in loaded
     assert not [m for m in loaded if m == "sim_world" or m.startswith("sim_world.")]
     assert not [m for m in loaded if is_research(m)]
+
+
+ARCHITECTURE_DOC = REPO / "docs" / "architecture.md"
+_TOP = "|".join((*PACKAGES[:-1], "tools", "tests", "missions", "scenes", "docs"))
+DOC_PATH = re.compile(rf"(?<![\w./-])((?:{_TOP})/[\w./-]*[\w/])")
+DOC_DOTTED = re.compile(rf"(?<![\w./-])((?:{'|'.join(PACKAGES)})(?:\.[A-Za-z_]\w*)+)")
+DOC_CLASS = re.compile(r"(?<![\w.])([A-Z][a-z0-9]+(?:[A-Z][a-z0-9]*)+)\b")
+NOT_OURS = {"ProcessPoolExecutor", "ValueError", "DroneInspect"}
+"""Names of other projects the page mentions in code spans (the Python library, Gymnasium's id)."""
+
+
+@cache
+def _top_level_names(path: Path) -> set[str]:
+    names: set[str] = set()
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            names.add(node.name)
+        elif isinstance(node, ast.Assign | ast.AnnAssign):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            names.update(t.id for t in targets if isinstance(t, ast.Name))
+        elif isinstance(node, ast.Import | ast.ImportFrom):
+            names.update((a.asname or a.name).split(".")[0] for a in node.names)
+    return names
+
+
+def _resolves(dotted: str) -> bool:
+    """`pkg.module[.name]`: the longest module prefix exists, and what follows it is defined there."""
+    parts = dotted.split(".")
+    for k in range(len(parts), 0, -1):
+        module = ".".join(parts[:k])
+        if module in MODULES:
+            return k == len(parts) or parts[k] in _top_level_names(MODULES[module])
+    return False
+
+
+def wrong_in_architecture_doc(text: str) -> list[str]:
+    """What docs/architecture.md gets wrong: modules it does not name (by their path from the repository
+    root), paths that do not exist, dotted names that do not resolve, classes nobody defines."""
+    spans = re.findall(r"`([^`\n]+)`", text)
+    wrong = [
+        f"module not named: {rel}"
+        for path in MODULES.values()
+        if path.name != "__init__.py" and (rel := str(path.relative_to(REPO))) not in text
+    ]
+    paths = {p for span in spans for p in DOC_PATH.findall(span) if "<" not in span}
+    wrong += [f"no such path: {p}" for p in sorted(paths) if not (REPO / p).exists()]
+    dotted = {d for span in spans for d in DOC_DOTTED.findall(span)}
+    wrong += [f"does not resolve: {d}" for d in sorted(dotted) if not _resolves(d)]
+    defined = set().union(*(_top_level_names(p) for p in MODULES.values()))
+    classes = {c for span in spans for c in DOC_CLASS.findall(span)} - NOT_OURS
+    wrong += [f"defined nowhere: {c}" for c in sorted(classes) if c not in defined]
+    return wrong
+
+
+def test_the_architecture_page_names_every_module_and_only_what_exists() -> None:
+    wrong = wrong_in_architecture_doc(ARCHITECTURE_DOC.read_text())
+    assert not wrong, "\n".join(wrong)
+
+
+def test_the_architecture_page_check_sees_what_drifted() -> None:
+    text = ARCHITECTURE_DOC.read_text().replace("`flight/relay.py`", "`flight/relays.py`")
+    text += "\n`controller.planning.loop.NoSuchLoop`, `FlyingCarpetVehicle`, `perception.no_module`\n"
+    wrong = wrong_in_architecture_doc(text)
+    assert "module not named: flight/relay.py" in wrong
+    assert "no such path: flight/relays.py" in wrong
+    assert "does not resolve: controller.planning.loop.NoSuchLoop" in wrong
+    assert "does not resolve: perception.no_module" in wrong
+    assert "defined nowhere: FlyingCarpetVehicle" in wrong

@@ -127,6 +127,26 @@ def test_arducopter_modes_map_to_the_flight_interfaces_as_mavsdk_reports_them() 
     assert not state.estimator_ok
 
 
+def test_a_forward_rangefinder_reaches_the_telemetry_and_a_downward_one_does_not() -> None:
+    """DISTANCE_SENSOR (cm) facing forward is the target's distance for a flown collection; one facing
+    down measures height, and a reading outside the sensor's own range is no reading."""
+    state = ArduPilotState()
+    state.system_id = 7
+
+    def distance(current_cm: int, orientation: int) -> None:
+        msg = M.MAVLink_distance_sensor_message(0, 30, 1200, current_cm, 10, 0, orientation, 0)
+        msg._header = M.MAVLink_header(msg.id, srcSystem=7, srcComponent=M.MAV_COMP_ID_AUTOPILOT1)
+        state.handle(msg)
+
+    assert state.snapshot(0.0).forward_range_m is None
+    distance(197, M.MAV_SENSOR_ROTATION_NONE)
+    assert state.snapshot(0.0).forward_range_m == pytest.approx(1.97)
+    distance(120, M.MAV_SENSOR_ROTATION_PITCH_270)  # downward: ignored
+    assert state.snapshot(0.0).forward_range_m == pytest.approx(1.97)
+    distance(1500, M.MAV_SENSOR_ROTATION_NONE)  # past its 12 m: out of range
+    assert state.snapshot(0.0).forward_range_m is None
+
+
 def test_it_flies_only_the_arducopter_it_was_told_to() -> None:
     port = _free_udp_port()
     px4 = FakeCopter(port, system_id=42, autopilot=M.MAV_AUTOPILOT_PX4)

@@ -196,3 +196,30 @@ def test_ardupilot_dying_mid_flight_ends_the_mission_as_a_lost_link(tmp_path: Pa
     assert float(lost.group(1)) <= 3.0  # declared lost by the link monitor, at its timeout
     assert process.returncode == 1
     assert not wait_gone(simulator, within_s=5.0)
+
+
+def test_the_collection_protocol_flies_through_ardupilot_with_labels_that_agree_with_the_truth(
+    tmp_path: Path,
+) -> None:
+    """`collect --vehicle ardupilot-sitl`: the goal found in the scene (distance from ArduPilot's forward
+    rangefinder), one capture per sector, every label within a few pixels of the simulator's truth."""
+    from controller.collection.config import FlownCollectConfig, SimOptions
+    from controller.collection.run import collect_flown
+    from drone_inspect_core.dataset import load_manifest
+    from drone_inspect_core.dataset_check import check_dataset
+
+    out = tmp_path / "data"
+    config = FlownCollectConfig(
+        out_dir=out, vehicle="ardupilot-sitl", camera=None, kind="gauge", goal="scene",
+        n_goal=1, n_per_sector=1, n_empty=0, block_size=3, test_every=2, progress=False,
+        sim=SimOptions(ardupilot_dir=Path(ARDUPILOT_DIR)),  # type: ignore[arg-type]
+    )  # fmt: skip
+    result = collect_flown(config)
+    assert result.complete and result.flagged == 0
+    rows, meta = load_manifest(out, include_flagged=True)
+    assert meta["vehicle"] == "ardupilot-sitl" and len(rows) == 1 + 9  # the goal, 8 sectors, the centre
+    check = check_dataset(out)
+    assert check.ok and check.image_labels is not None and check.image_labels.agree == check.image_labels.n
+    for row in rows:
+        assert math.dist(row["offset_px"], row["truth"]["offset_px"]) < 3.0, row["id"]
+        assert row["label"]["distance_source"] == "rangefinder"

@@ -103,3 +103,37 @@ def test_close_ends_streams_and_frees_the_port() -> None:
     sock.close()
     with MjpegServer(port=PORT + 4) as again:  # the port is free again
         assert again.port == PORT + 4
+
+
+def test_two_hundred_viewers_connecting_at_once_all_get_frames() -> None:
+    """The listen backlog admits a crowd: 200 viewers connecting in the same instant each get a frame
+    (with a backlog of 5, 23 of 200 timed out connecting)."""
+    import threading
+
+    n = 200
+    with MjpegServer(port=0) as server:
+        server.publish(_image(90))
+        start = threading.Barrier(n)
+        got: list[bool] = [False] * n
+
+        def viewer(i: int) -> None:
+            start.wait()
+            try:
+                with socket.create_connection(("127.0.0.1", server.port), timeout=2.0) as sock:
+                    sock.sendall(b"GET /stream.mjpg HTTP/1.0\r\n\r\n")
+                    data = b""
+                    while b"\xff\xd8" not in data:  # a JPEG's start
+                        chunk = sock.recv(4096)
+                        if not chunk:
+                            return
+                        data += chunk
+                    got[i] = True
+            except OSError:
+                return
+
+        threads = [threading.Thread(target=viewer, args=(i,)) for i in range(n)]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join(timeout=20.0)
+        assert sum(got) == n

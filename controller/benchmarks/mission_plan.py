@@ -33,7 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from controller.missions.schema import SIMULATED_VEHICLES, Mission, parse_mission
+from controller.missions.schema import Mission, parse_mission
+from controller.missions.vehicles import SIMULATED_VEHICLES
 from controller.planning.grounding import TargetQuery
 from controller.planning.planners import PLANNER_NAMES
 from controller.training.instructions import builtin_templates

@@ -12,11 +12,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+from controller.missions.vehicles import SIM, SIMULATED_VEHICLES
 from drone_inspect_core.sim_speed import parse_sim_speed
 
 GOAL_HERE, GOAL_SCENE = "here", "scene"
-SIM_MAVLINK, PX4_SITL = "sim-mavlink", "px4-sitl"
-SIMULATED = (SIM_MAVLINK, PX4_SITL)
+SIMULATED = tuple(v for v in SIMULATED_VEHICLES if v != SIM)
+"""The vehicles a collection can start itself (the in-process `sim` has no MAVLink link to fly)."""
 OnLoss = Literal["land", "return"]
 
 
@@ -57,7 +58,8 @@ class Box3:
 
 @dataclass(frozen=True)
 class SimOptions:
-    """The simulated world of a `sim-mavlink` / `px4-sitl` collection (ignored for a real vehicle)."""
+    """The simulated world of a `sim-mavlink`, `px4-sitl` or `ardupilot-sitl` collection (ignored for a real
+    vehicle)."""
 
     scene_file: Path | None = None
     scene_seed: int = 0
@@ -65,6 +67,8 @@ class SimOptions:
     """sim-mavlink: simulated seconds per wall second, or "max"."""
     px4_dir: Path | None = None
     px4_speed: float | str = "max"
+    ardupilot_dir: Path | None = None
+    ardupilot_speed: float | str = "max"
     start_right_m: float = 0.4
     """The drone starts landed below a pose this far right of the centred one (it flies over, as an
     operator would, with `--goal scene`)."""
@@ -73,6 +77,7 @@ class SimOptions:
     def __post_init__(self) -> None:
         parse_sim_speed(str(self.sim_speed))
         parse_sim_speed(str(self.px4_speed))
+        parse_sim_speed(str(self.ardupilot_speed))
         if self.scene_seed < 0:
             raise ValueError(f"--scene-seed must be >= 0, got {self.scene_seed}")
         if not 0.8 <= self.start_distance_m <= 5.0:
@@ -155,7 +160,7 @@ class FlownCollectConfig:
             )
         if self.goal == GOAL_SCENE and self.vehicle not in SIMULATED:
             raise ValueError(
-                "--goal scene needs a simulated vehicle (sim-mavlink or px4-sitl); fly a real one to the "
+                f"--goal scene needs a simulated vehicle ({', '.join(SIMULATED)}); fly a real one to the "
                 "centred pose and use --goal here"
             )
         if self.distance_m is not None and not (math.isfinite(self.distance_m) and self.distance_m > 0):

@@ -1,7 +1,8 @@
 """Opening the vehicle of a flown collection, as `dronectl fly` opens a mission's: the mission kits' openers.
 
-`sim-mavlink` and `px4-sitl` start their simulator as a child (free ports for this run, a random MAVLink
-system id so only that vehicle is flown, gone with this process, the .tlog relay in front); the world
+`sim-mavlink`, `px4-sitl` and `ardupilot-sitl` start their simulator as a child (free ports for this
+run, a random MAVLink system id so only that vehicle is flown, gone with this process, the .tlog relay in
+front); the world
 is described as a mission (`controller.missions.schema.Mission`: scene, seed, the kind, the start pose
 below which the drone rests, the simulator's speed) because that is what the kits read. Any other
 `--vehicle` is a MAVLink URL with `--camera` its stream, opened as a real vehicle (no simulator module is
@@ -16,8 +17,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from controller.collection.config import PX4_SITL, SIM_MAVLINK, FlownCollectConfig
+from controller.collection.config import FlownCollectConfig
 from controller.missions.kits.base import OpenedVehicle
+from controller.missions.vehicles import ARDUPILOT_SITL, PX4_SITL, SIM_MAVLINK
 
 if TYPE_CHECKING:
     from controller.missions.kits.simulated import SimulatedVehicle
@@ -42,10 +44,14 @@ def collection_mission(config: FlownCollectConfig) -> Mission:
     }
     if config.vehicle == SIM_MAVLINK:
         data["sim_speed"] = sim.sim_speed
-    else:
+    elif config.vehicle == PX4_SITL:
         data["px4"] = {"speed": sim.px4_speed, "keep_ulog": False}
         if sim.px4_dir is not None:
             data["px4"]["dir"] = str(sim.px4_dir)
+    elif config.vehicle == ARDUPILOT_SITL:
+        data["ardupilot"] = {"speed": sim.ardupilot_speed, "keep_logs": False}
+        if sim.ardupilot_dir is not None:
+            data["ardupilot"]["dir"] = str(sim.ardupilot_dir)
     return parse_mission(data, source="the collection's simulated world")
 
 
@@ -63,6 +69,11 @@ def open_collection_vehicle(
         from controller.missions.kits.px4_sitl import open_px4_sitl
 
         with open_px4_sitl(collection_mission(config), flight_dir) as sim:
+            yield sim.opened, sim
+    elif config.vehicle == ARDUPILOT_SITL:
+        from controller.missions.kits.ardupilot_sitl import open_ardupilot_sitl
+
+        with open_ardupilot_sitl(collection_mission(config), flight_dir) as sim:
             yield sim.opened, sim
     else:
         from controller.missions.kits.real import open_real_vehicle

@@ -56,7 +56,7 @@ except ImportError as exc:  # pragma: no cover - depends on the installed extras
 from controller.missions.kits.sim import SimWorld, open_sim_world
 from controller.missions.schema import Mission, parse_mission
 from controller.planning.actions import ALL_ACTIONS, Action
-from controller.planning.loop_records import MoveSchedule
+from controller.planning.loop_records import LoopSettings, MoveSchedule
 from controller.training.instructions import CORPORA, builtin_templates, fill
 from drone_inspect_core.centring import default_epsilon_px, within
 from flight.moves import fly_offset, take_off_to_start
@@ -68,10 +68,11 @@ MAX_INSTRUCTION_CHARS = 200
 STEP_COST = 0.01
 CENTRED_BONUS = 1.0
 LOST_PENALTY = 1.0
-HOVER_S = 0.3
-SPEED_M_S = 0.5
-MIN_MOVE_M = 0.05
-SHRINK = 0.5
+_LOOP = LoopSettings()  # the loop's own defaults: an episode moves and waits as a mission does
+HOVER_S = _LOOP.settle_s
+SPEED_M_S = _LOOP.speed_m_s
+MIN_MOVE_M = _LOOP.min_move_m
+SHRINK = _LOOP.shrink
 
 
 class CentringEnv(gym.Env[dict[str, Any], np.int64]):

@@ -71,6 +71,14 @@ from pydantic import (
     model_validator,
 )
 
+from controller.missions.vehicles import (
+    ARDUPILOT_SITL,
+    MAVLINK_SIMULATED,
+    PX4_SITL,
+    SIM,
+    SIM_MAVLINK,
+    SIMULATED_VEHICLES,
+)
 from controller.planning.grounding import InstructionRefused, parse_instruction, understand
 from controller.planning.loop_records import LoopSettings, Outcome
 from controller.planning.planners import PLANNERS, PlannerName
@@ -91,11 +99,6 @@ from flight.urls import validate_connection_url
 
 DetectorName = Literal["image", "truth"]
 
-SIM = "sim"
-SIM_MAVLINK = "sim-mavlink"
-PX4_SITL = "px4-sitl"
-ARDUPILOT_SITL = "ardupilot-sitl"
-SIMULATED_VEHICLES = (SIM, SIM_MAVLINK, ARDUPILOT_SITL, PX4_SITL)
 _SIMULATED = ", ".join(map(repr, SIMULATED_VEHICLES))
 _MAVLINK_SCHEMES = ("udp://", "udpin://", "udpout://", "tcp://", "tcpin://", "tcpout://", "serial://")
 _STREAM_SCHEMES = ("http://", "https://", "rtsp://", "file://")
@@ -509,7 +512,7 @@ class Mission(StrictModel):
             )
         if self.vehicle not in (SIM, PX4_SITL, ARDUPILOT_SITL) and self.wind is not None:
             raise ValueError("wind: only the worlds of 'sim', 'px4-sitl' and 'ardupilot-sitl' simulate wind")
-        mavlink_sim = self.vehicle in (SIM_MAVLINK, PX4_SITL, ARDUPILOT_SITL)
+        mavlink_sim = self.vehicle in MAVLINK_SIMULATED
         if self.faults.link is not None and not (mavlink_sim or self.vehicle.startswith("udpin://")):
             raise ValueError(
                 "faults.link: needs a relayed MAVLink link: sim-mavlink, a SITL vehicle or a udpin:// URL"

@@ -20,6 +20,7 @@ MESSAGE_RATES_HZ: dict[int, float] = {
     M.MAVLINK_MSG_ID_EKF_STATUS_REPORT: 2.0,
     M.MAVLINK_MSG_ID_SYS_STATUS: 2.0,
     M.MAVLINK_MSG_ID_HOME_POSITION: 1.0,
+    M.MAVLINK_MSG_ID_DISTANCE_SENSOR: 10.0,  # a forward rangefinder, where the vehicle has one
 }
 """What the backend reads, at ArduPilot's clock (simulated time in SITL: ×k faster in wall time)."""
 

@@ -16,11 +16,11 @@ from __future__ import annotations
 
 import math
 import threading
-from collections import deque
 from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from flight.status_texts import StatusTexts
 from flight.types import Attitude, FlightMode, PositionNed, Telemetry, VelocityNed
 
 COPTER_MODES = {
@@ -90,10 +90,10 @@ class ArduPilotState:
         self.home_ok = False
         self.prearm_ok: bool | None = None
         self.battery_percent: float | None = None
+        self.forward_range_m: float | None = None
         self.vehicle_time_s = math.nan
         self.seen: set[str] = set()
-        self.texts: deque[str] = deque(maxlen=100)
-        self.texts_received = 0
+        self.texts = StatusTexts()
 
     # ------------------------------------------------------------------ from the reader thread
     def handle(self, msg: Any) -> None:
@@ -131,11 +131,14 @@ class ArduPilotState:
                     self.prearm_ok = bool(msg.onboard_control_sensors_health & bit)
                 if msg.battery_remaining >= 0:
                     self.battery_percent = float(msg.battery_remaining)
+            elif kind == "DISTANCE_SENSOR" and msg.orientation == mavlink.MAV_SENSOR_ROTATION_NONE:
+                # forward only (a downward one measures height); centimetres, in its own range or none
+                in_range = msg.min_distance <= msg.current_distance <= msg.max_distance
+                self.forward_range_m = msg.current_distance / 100.0 if in_range else None
             elif kind == "SYSTEM_TIME":
                 self._clock(msg.time_boot_ms)
             elif kind == "STATUSTEXT":
-                self.texts.append(f"{_severity(msg.severity)}: {msg.text}")
-                self.texts_received += 1
+                self.texts.add(f"{_severity(msg.severity)}: {msg.text}")
 
     def _clock(self, time_boot_ms: int) -> None:
         stamp_s = time_boot_ms * 1e-3
@@ -165,21 +168,8 @@ class ArduPilotState:
                 flight_mode=flight_mode_of(self.custom_mode),
                 timestamp_s=timestamp_s,
                 battery_remaining_percent=self.battery_percent,
+                forward_range_m=self.forward_range_m,
             )
-
-    def all_texts(self) -> list[str]:
-        with self.lock:
-            return list(self.texts)
-
-    def last_text(self) -> str:
-        with self.lock:
-            return self.texts[-1] if self.texts else ""
-
-    def texts_since(self, count: int) -> str:
-        """The texts after the first `count` received, "; "-joined (as many as are still kept)."""
-        with self.lock:
-            new = min(self.texts_received - count, len(self.texts))
-            return "; ".join(list(self.texts)[len(self.texts) - new :]) if new > 0 else ""
 
 
 def _severity(severity: int) -> str:

@@ -184,7 +184,7 @@ class ArduPilotVehicle(Vehicle):
         return self.state.snapshot(self.time_s())
 
     def status_texts(self) -> list[str]:
-        return self.state.all_texts()
+        return self.state.texts.all()
 
     @property
     def wall_paced_telemetry(self) -> bool:  # type: ignore[override]
@@ -224,7 +224,7 @@ class ArduPilotVehicle(Vehicle):
                 log.info(
                     "waiting for ArduPilot's estimator (%.0f of %.0f s): EKF flags %#06x, home %s; %r",
                     self.time_s() - start, timeout_s, state.ekf_flags, "ok" if state.home_ok else "not yet",
-                    state.last_text(),
+                    state.texts.last(),
                 )  # fmt: skip
             return ok
 
@@ -241,8 +241,8 @@ class ArduPilotVehicle(Vehicle):
             if ack.accepted:
                 break
             if deadline.remaining_s() < self.config.arm_retry_period_s:
-                raise CommandDeniedError("arm()", ack.name, self.state.last_text())
-            log.info("arming refused (%s; %r): retrying", ack.name, self.state.last_text())
+                raise CommandDeniedError("arm()", ack.name, self.state.texts.last())
+            log.info("arming refused (%s; %r): retrying", ack.name, self.state.texts.last())
             self.sleep(self.config.arm_retry_period_s)
         self._wait(lambda t: t.armed, max(0.5, deadline.remaining_s()), "arm()", "armed state in telemetry")
         if not math.isfinite(self._ground_down_m):
@@ -257,7 +257,7 @@ class ArduPilotVehicle(Vehicle):
             self._set_mode("GUIDED", "takeoff()")
         ack = self._command(M.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, math.nan, 0, 0, altitude_m), "takeoff()")
         if not ack.accepted:
-            raise CommandDeniedError("takeoff()", ack.name, self.state.last_text())
+            raise CommandDeniedError("takeoff()", ack.name, self.state.texts.last())
         target_m = altitude_m - self.config.altitude_tolerance_m
         self._wait(
             lambda t: (
@@ -293,7 +293,7 @@ class ArduPilotVehicle(Vehicle):
         if self._offboard and self.state.custom_mode != GUIDED:
             self._offboard = False
             mode = mode_name(self.state.custom_mode)
-            raise OffboardInterruptedError(origin, mode, self.state.texts_since(self._texts_at_offboard))
+            raise OffboardInterruptedError(origin, mode, self.state.texts.since(self._texts_at_offboard))
 
     def start_offboard(self, timeout_s: float | None = None) -> None:
         if not self._setpoint_set:
@@ -302,7 +302,7 @@ class ArduPilotVehicle(Vehicle):
             )
         self._set_mode("GUIDED", "start_offboard()", timeout_s)
         with self.state.lock:
-            self._texts_at_offboard = self.state.texts_received
+            self._texts_at_offboard = self.state.texts.received
         self._offboard = True
         self._send_setpoint()
 
@@ -336,7 +336,7 @@ class ArduPilotVehicle(Vehicle):
             try:  # ArduPilot's own disarm after landing may have won the race
                 self._wait(lambda t: not t.armed, DISARM_RACE_WAIT_S, "disarm()", "disarmed state")
             except FlightTimeoutError:
-                raise CommandDeniedError("disarm()", ack.name, self.state.last_text()) from None
+                raise CommandDeniedError("disarm()", ack.name, self.state.texts.last()) from None
         self._wait(
             lambda t: not t.armed, timeout_s or self.config.timeouts.disarm_s, "disarm()", "disarmed state"
         )
@@ -358,11 +358,11 @@ class ArduPilotVehicle(Vehicle):
             flag = float(M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
             ack = self._command(M.MAV_CMD_DO_SET_MODE, (flag, float(number)), origin)
             if not ack.accepted:
-                raise CommandDeniedError(origin, ack.name, f"mode {name}: {self.state.last_text()!r}")
+                raise CommandDeniedError(origin, ack.name, f"mode {name}: {self.state.texts.last()!r}")
         deadline = Deadline(self, timeout_s)
         while self.state.custom_mode != number:
             if deadline.expired():
-                observed = f"{mode_name(self.state.custom_mode)} ({self.state.last_text()!r})"
+                observed = f"{mode_name(self.state.custom_mode)} ({self.state.texts.last()!r})"
                 raise ModeChangeError(origin, name, observed, timeout_s)
             self._require_link(origin).monitor.check(origin)
             self.sleep(self.config.poll_s)

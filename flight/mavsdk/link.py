@@ -11,7 +11,6 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -24,6 +23,7 @@ from mavsdk.plugins.telemetry import Telemetry as MavsdkTelemetry
 
 from flight.link import LinkMonitor
 from flight.safety import FlightTimeouts
+from flight.status_texts import StatusTexts
 from flight.types import Attitude, FlightMode, PositionNed, Telemetry, VelocityNed
 from flight.urls import validate_connection_url
 
@@ -101,7 +101,11 @@ def route_mavsdk_logs() -> None:
 class TelemetryCache:
     """The latest of every telemetry stream the backend reads, stored by MAVSDK's callback thread."""
 
-    def __init__(self, link_timeout_s: float) -> None:
+    def __init__(self, link_timeout_s: float, heartbeat_paced_by_wall: bool = True) -> None:
+        """`heartbeat_paced_by_wall`: False for a simulated autopilot on its own clock (lockstep SITL): its
+        1 Hz heartbeat (simulated time) comes further apart than MAVSDK's 3 s wall-clock timeout whenever the
+        simulation runs slower than a third of real time (a loaded machine), so MAVSDK's "disconnected" is
+        no sign of a lost link there; silence for the link timeout still is."""
         self.lock = threading.Lock()
         self.position: tuple[float, float, float] = _NAN3
         self.velocity: tuple[float, float, float] = _NAN3
@@ -112,11 +116,10 @@ class TelemetryCache:
         self.battery_percent: float | None = None
         self.local_position_ok = False
         self.home_ok = False
-        self.texts: deque[str] = deque(maxlen=100)
-        self.texts_received = 0  # all STATUSTEXTs so far (the deque keeps the latest only)
+        self.texts = StatusTexts()
         self.vehicle_time_s = math.nan  # the autopilot's clock, from its ATTITUDE timestamps
         self.forward_range_m: float | None = None
-        self.link = LinkMonitor(link_timeout_s)
+        self.link = LinkMonitor(link_timeout_s, quiet_s=0.5 if heartbeat_paced_by_wall else link_timeout_s)
 
     def subscribe(self, system: Any, tel: MavsdkTelemetry) -> None:
         def store(fn: Callable[[Any], None]) -> Callable[[Any, Any], None]:
@@ -152,8 +155,7 @@ class TelemetryCache:
             self.forward_range_m = float(current) if in_range else None
 
         def status_text(d: Any) -> None:
-            self.texts.append(f"{d.type.name}: {d.text}")
-            self.texts_received += 1
+            self.texts.add(f"{d.type.name}: {d.text}")
 
         tel.subscribe_position_velocity_ned(store(pos_vel))
         tel.subscribe_attitude_euler(store(attitude))
@@ -182,16 +184,3 @@ class TelemetryCache:
                 forward_range_m=self.forward_range_m,
             )
 
-    def all_texts(self) -> list[str]:
-        with self.lock:
-            return list(self.texts)
-
-    def last_text(self) -> str:
-        with self.lock:
-            return self.texts[-1] if self.texts else ""
-
-    def texts_since(self, count: int) -> str:
-        """The texts after the first `count` received, "; "-joined (as many as are still kept)."""
-        with self.lock:
-            new = min(self.texts_received - count, len(self.texts))
-            return "; ".join(list(self.texts)[len(self.texts) - new :]) if new > 0 else ""

@@ -111,7 +111,7 @@ class MavsdkVehicle(Vehicle):
                 "running and sending to this address and port? (PX4 SITL and `dronectl sim-vehicle` send "
                 "to 14540 by default)",
             )
-        self._cache = TelemetryCache(self.config.link_timeout_s)
+        self._cache = TelemetryCache(self.config.link_timeout_s, self.config.clock == "wall")
         # Keep every MAVSDK object referenced for the connection's life: a plugin left to the
         # garbage collector is destroyed with its subscriptions, and telemetry silently stops.
         self._system = system
@@ -164,16 +164,16 @@ class MavsdkVehicle(Vehicle):
         return self._cache.snapshot(self.time_s())
 
     def status_texts(self) -> list[str]:
-        return self._cache.all_texts()
+        return self._cache.texts.all()
 
     def _last_text(self) -> str:
-        return self._cache.last_text()
+        return self._cache.texts.last()
 
     def _texts_since_offboard(self) -> str:
         """What the vehicle said since offboard began: a failsafe sends several texts, and the one
         naming the cause ("No offboard signal") need not be the last by the time the heartbeat
         shows the mode change."""
-        return self._cache.texts_since(self._texts_at_offboard)
+        return self._cache.texts.since(self._texts_at_offboard)
 
     @property
     def wall_paced_telemetry(self) -> bool:  # type: ignore[override]
@@ -321,7 +321,7 @@ class MavsdkVehicle(Vehicle):
                 log.info("offboard refused (%s): sending the setpoint again", self._last_text())
         self._confirm_mode(FlightMode.OFFBOARD, timeout_s, "start_offboard()")
         with self._cache.lock:
-            self._texts_at_offboard = self._cache.texts_received
+            self._texts_at_offboard = self._cache.texts.received
         self._in_offboard = True
 
     def hold(self) -> None:

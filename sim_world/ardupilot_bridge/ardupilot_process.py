@@ -20,24 +20,20 @@ from __future__ import annotations
 
 import logging
 import os
-import shutil
 import signal
 import socket
-import subprocess
-import tempfile
 from collections.abc import Mapping
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from sim_world.ardupilot_bridge.link import JSON_BASE_PORT, PORT_STRIDE
-from sim_world.sitl.children import InstanceBusyError, find_sitl_dir, instance_lock, set_parent_death_signal
+from drone_inspect_core.ports import ARDUPILOT_JSON_UDP, ARDUPILOT_MAVLINK, ARDUPILOT_PORT_STRIDE
+from sim_world.sitl.children import InstanceBusyError, SitlChild, find_sitl_dir, instance_lock
 
 log = logging.getLogger(__name__)
 
 ARDUPILOT_DIR_ENV = "ARDUPILOT_SITL_DIR"
 MAX_INSTANCE = 9
-MAVLINK_BASE_PORT = 5760  # ArduPilot's SERIAL0 port number; here the UDP port it sends its MAVLink to
 AIRFRAME_PARAMS = Path(__file__).with_name("pybullet_quadx.parm")
 SHARED_ARDUPILOT_DIR = Path(__file__).resolve().parents[3] / "shared" / "ardupilot-sitl"
 """`../shared/ardupilot-sitl` beside the checkout: where an ArduPilot folder is looked for last."""
@@ -92,11 +88,11 @@ def find_ardupilot_dir(
 
 
 def json_port(instance: int) -> int:
-    return JSON_BASE_PORT + PORT_STRIDE * instance
+    return ARDUPILOT_JSON_UDP + ARDUPILOT_PORT_STRIDE * instance
 
 
 def default_mavlink_port(instance: int) -> int:
-    return MAVLINK_BASE_PORT + PORT_STRIDE * instance
+    return ARDUPILOT_MAVLINK + ARDUPILOT_PORT_STRIDE * instance
 
 
 def _udp_port_taken(port: int) -> bool:
@@ -143,15 +139,19 @@ class ArduPilotOptions:
         return default_mavlink_port(self.instance) if self.mavlink_port is None else self.mavlink_port
 
 
-class ArduPilotProcess:
+class ArduPilotProcess(SitlChild):
     """ArduCopter SITL as a child process; `close()` stops it (idempotent)."""
 
+    name = "ArduPilot"
+    start_error = ArduPilotStartError
+    death_signal = signal.SIGKILL  # waiting on a simulator that is gone, it never reaches its SIGTERM handler
+    stop_timeout_s = 3.0
+    slow_stop = (logging.INFO, " (no physics answers)")
+    log_pattern = "logs/*.BIN"
+
     def __init__(self, options: ArduPilotOptions) -> None:
+        super().__init__(options.instance, options.console_log, options.keep_logs_in, "ardupilot.log")
         self.options = options
-        self.workdir = Path(tempfile.mkdtemp(prefix=f"ardupilot-sitl-{options.instance}-"))
-        self.console_log = options.console_log or self.workdir / "ardupilot.log"
-        self._process: subprocess.Popen[bytes] | None = None
-        self._log_file = None
 
     def command(self) -> list[str]:
         opts = self.options
@@ -170,84 +170,9 @@ class ArduPilotProcess:
             command += ["--sysid", str(opts.system_id)]
         return command
 
-    # -------------------------------------------------------------- lifecycle
     def start(self) -> ArduPilotProcess:
         command = self.command()
-        self.console_log.parent.mkdir(parents=True, exist_ok=True)
-        self._log_file = self.console_log.open("wb")
         log.info("starting ArduPilot SITL instance %d: %s (in %s)", self.options.instance, " ".join(command),
                  self.workdir)  # fmt: skip
-        self._process = subprocess.Popen(
-            command,
-            cwd=self.workdir,
-            stdin=subprocess.DEVNULL,
-            stdout=self._log_file,
-            stderr=subprocess.STDOUT,
-            preexec_fn=lambda: set_parent_death_signal(signal.SIGKILL),
-        )
+        self._spawn(command, self.workdir)
         return self
-
-    @property
-    def pid(self) -> int | None:
-        return None if self._process is None else self._process.pid
-
-    @property
-    def alive(self) -> bool:
-        return self._process is not None and self._process.poll() is None
-
-    def output_tail(self, chars: int = 2000) -> str:
-        try:
-            return self.console_log.read_text(errors="replace")[-chars:]
-        except OSError:
-            return ""
-
-    def check_alive(self) -> None:
-        """Raise `ArduPilotStartError` with ArduPilot's last words if it has exited."""
-        if self._process is not None and self._process.poll() is not None:
-            raise ArduPilotStartError(
-                f"ArduPilot SITL exited with {self._process.returncode}; its console ended with:\n"
-                f"{self.output_tail()}"
-            )
-
-    def terminate(self) -> None:
-        """Ask ArduPilot to stop (SIGTERM): it exits once it gets its next physics frame answered."""
-        if self._process is not None and self._process.poll() is None:
-            self._process.send_signal(signal.SIGTERM)
-
-    def kill(self) -> None:
-        """Stop ArduPilot dead (a crashed autopilot: the simulator link just goes quiet)."""
-        if self._process is not None and self._process.poll() is None:
-            self._process.kill()
-            self._process.wait(5.0)
-
-    def close(self, timeout_s: float = 3.0) -> None:
-        process, self._process = self._process, None
-        if process is not None and process.poll() is None:
-            process.send_signal(signal.SIGTERM)
-            try:
-                process.wait(timeout_s)
-            except subprocess.TimeoutExpired:
-                log.info("ArduPilot did not stop within %.0f s of SIGTERM (no physics answers): killing it",
-                         timeout_s)  # fmt: skip
-                process.kill()
-                process.wait(timeout_s)
-        if self._log_file is not None:
-            self._log_file.close()
-            self._log_file = None
-        if self.options.keep_logs_in is not None:
-            self._keep_logs(self.options.keep_logs_in)
-        shutil.rmtree(self.workdir, ignore_errors=True)
-
-    def _keep_logs(self, folder: Path) -> None:
-        logs = sorted((self.workdir / "logs").glob("*.BIN"))
-        folder.mkdir(parents=True, exist_ok=True)
-        for binlog in logs:
-            shutil.copy2(binlog, folder / binlog.name)
-        if self.options.console_log is None and self.console_log.exists():
-            shutil.copy2(self.console_log, folder / "ardupilot.log")
-
-    def __enter__(self) -> ArduPilotProcess:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

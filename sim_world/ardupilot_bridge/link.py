@@ -14,12 +14,11 @@ import logging
 import select
 import socket
 
+from drone_inspect_core.ports import ARDUPILOT_JSON_UDP
 from sim_world.ardupilot_bridge.protocol import ServoPacket, ServoPacketError
 
 log = logging.getLogger(__name__)
 
-JSON_BASE_PORT = 9002
-PORT_STRIDE = 10  # ArduPilot adds 10·N to every port of instance N
 
 
 class PhysicsLinkError(OSError):
@@ -33,7 +32,7 @@ class ArduPilotSilentError(ConnectionError):
 class JsonPhysicsServer:
     """One ArduPilot's physics link; `close()` or a context manager."""
 
-    def __init__(self, host: str = "127.0.0.1", port: int = JSON_BASE_PORT) -> None:
+    def __init__(self, host: str = "127.0.0.1", port: int = ARDUPILOT_JSON_UDP) -> None:
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self._sock.bind((host, port))

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drone_inspect_core.ports import ARDUPILOT_VIDEO_HTTP
 from drone_inspect_core.world_options import CameraFaults, StartPose, WindConfig
 from sim_world.ardupilot_bridge.ardupilot_process import (
     MAX_INSTANCE,
@@ -38,7 +39,6 @@ from sim_world.world import derived_seed
 
 log = logging.getLogger(__name__)
 
-VIDEO_PORT_BASE = 8090  # 8090+N, beside px4-sim's 8080+N
 STOP_SERVING_S = 3.0  # how long the bridge keeps answering while ArduPilot shuts down
 
 
@@ -94,7 +94,7 @@ class ArduPilotSimConfig:
 
     @property
     def http_video_port(self) -> int:
-        return VIDEO_PORT_BASE + self.instance if self.video_port is None else self.video_port
+        return ARDUPILOT_VIDEO_HTTP + self.instance if self.video_port is None else self.video_port
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ Lockstep: PX4's clock is the HIL_SENSOR timestamp, and the bridge steps the phys
 only once PX4 has answered the last sensor message, so neither rendering nor Python
 overhead ever makes PX4 miss a deadline. The camera renders at 30 Hz of simulated
 time and streams MJPEG with the truth endpoint, through the same render process as
-`sim-vehicle` (`sim_world.vehicle.video`).
+`sim-vehicle` (`sim_world.rendering.video`).
 
 Modules: `geodesy` (home point, magnetic field, atmosphere), `sensors` (noise and
 bias models), `messages` (the HIL messages), `link` (the TCP server), `bridge` (the

@@ -24,9 +24,10 @@ import time
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from drone_inspect_core.ports import PX4_SIMULATOR_TCP
+
 log = logging.getLogger(__name__)
 
-SIMULATOR_BASE_PORT = 4560
 
 
 class SimulatorLinkError(OSError):
@@ -77,7 +78,7 @@ def _tcp_inode(local: tuple[str, int], remote: tuple[str, int]) -> int | None:
 class SimulatorServer:
     """TCP server for one PX4 connection; `close()` or a context manager."""
 
-    def __init__(self, host: str = "127.0.0.1", port: int = SIMULATOR_BASE_PORT) -> None:
+    def __init__(self, host: str = "127.0.0.1", port: int = PX4_SIMULATOR_TCP) -> None:
         self._listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         try:
             self._listener.bind((host, port))

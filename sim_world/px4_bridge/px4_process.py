@@ -31,15 +31,11 @@ from __future__ import annotations
 import logging
 import math
 import os
-import shutil
-import signal
-import subprocess
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from sim_world.sitl.children import find_sitl_dir, set_parent_death_signal
+from sim_world.sitl.children import SitlChild, find_sitl_dir
 
 log = logging.getLogger(__name__)
 
@@ -163,15 +159,16 @@ class Px4Options:
         check_px4_params(self.params)
 
 
-class Px4Process:
+class Px4Process(SitlChild):
     """PX4 SITL in external-simulator mode as a child process; `close()` stops it (idempotent)."""
 
+    name = "PX4"
+    start_error = Px4StartError
+    log_pattern = "run/log/**/*.ulg"
+
     def __init__(self, options: Px4Options) -> None:
+        super().__init__(options.instance, options.console_log, options.keep_logs_in, "px4.log")
         self.options = options
-        self.workdir = Path(tempfile.mkdtemp(prefix=f"px4-sitl-{options.instance}-"))
-        self.console_log = options.console_log or self.workdir / "px4.log"
-        self._process: subprocess.Popen[bytes] | None = None
-        self._log_file = None
 
     # -------------------------------------------------------------- lifecycle
     def start(self) -> Px4Process:
@@ -197,19 +194,9 @@ class Px4Process:
             PX4_SYS_AUTOSTART=str(AIRFRAME_ID),
             PATH=f"{links}:{px4 / 'bin'}:{env.get('PATH', '/usr/bin:/bin')}",
         )
-        self.console_log.parent.mkdir(parents=True, exist_ok=True)
-        self._log_file = self.console_log.open("wb")
         command = [str(px4 / "bin" / "px4"), "-i", str(opts.instance), "-d", str(px4 / "etc")]
         log.info("starting PX4 SITL instance %d: %s (in %s)", opts.instance, " ".join(command), run_dir)
-        self._process = subprocess.Popen(
-            command,
-            cwd=run_dir,
-            env=env,
-            stdin=subprocess.DEVNULL,
-            stdout=self._log_file,
-            stderr=subprocess.STDOUT,
-            preexec_fn=set_parent_death_signal,
-        )
+        self._spawn(command, run_dir, env)
         return self
 
     def _params_script(self) -> str:
@@ -222,71 +209,6 @@ class Px4Process:
         for name, value in params.items():
             lines.append(f"param set {name} {float(value):g}")
         return "\n".join(lines) + "\n"
-
-    @property
-    def pid(self) -> int | None:
-        return None if self._process is None else self._process.pid
-
-    @property
-    def alive(self) -> bool:
-        return self._process is not None and self._process.poll() is None
-
-    @property
-    def returncode(self) -> int | None:
-        return None if self._process is None else self._process.poll()
-
-    def output_tail(self, chars: int = 2000) -> str:
-        try:
-            return self.console_log.read_text(errors="replace")[-chars:]
-        except OSError:
-            return ""
-
-    def check_alive(self) -> None:
-        """Raise `Px4StartError` with PX4's last words if it has exited."""
-        if self._process is not None and self._process.poll() is not None:
-            raise Px4StartError(
-                f"PX4 SITL exited with {self._process.returncode}; its console ended with:\n"
-                f"{self.output_tail()}"
-            )
-
-    def kill(self) -> None:
-        """Stop PX4 dead (a crashed autopilot: no shutdown, the simulator link just drops)."""
-        if self._process is not None and self._process.poll() is None:
-            self._process.kill()
-            self._process.wait(5.0)
-
-    def close(self, timeout_s: float = 5.0) -> None:
-        process, self._process = self._process, None
-        if process is not None and process.poll() is None:
-            process.send_signal(signal.SIGTERM)  # PX4 shuts down its modules and closes its log
-            try:
-                process.wait(timeout_s)
-            except subprocess.TimeoutExpired:
-                log.warning("PX4 did not stop within %.0f s of SIGTERM: killing it", timeout_s)
-                process.kill()
-                process.wait(timeout_s)
-        if self._log_file is not None:
-            self._log_file.close()
-            self._log_file = None
-        if self.options.keep_logs_in is not None:
-            self._keep_logs(self.options.keep_logs_in)
-        shutil.rmtree(self.workdir, ignore_errors=True)
-
-    def _keep_logs(self, folder: Path) -> None:
-        logs = sorted((self.workdir / "run" / "log").rglob("*.ulg"))
-        if not logs and self.options.console_log is not None:
-            return
-        folder.mkdir(parents=True, exist_ok=True)
-        for ulog in logs:
-            shutil.copy2(ulog, folder / ulog.name)
-        if self.options.console_log is None and self.console_log.exists():
-            shutil.copy2(self.console_log, folder / "px4.log")
-
-    def __enter__(self) -> Px4Process:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 _OUR_HOOK = "# written by drone-inspect for this run: sourced by PX4's rcS in place of its own {}"

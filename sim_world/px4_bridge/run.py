@@ -17,14 +17,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
-from drone_inspect_core.ports import free_port
+from drone_inspect_core.ports import (
+    PX4_OFFBOARD_REMOTE_UDP,
+    PX4_SIMULATOR_TCP,
+    SIM_VEHICLE_VIDEO_HTTP,
+    free_port,
+)
 from drone_inspect_core.world_options import CameraFaults, StartPose, WindConfig
 from sim_world.process_entry import say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
 from sim_world.px4_bridge.bridge import BridgeStats, BridgeTiming, CameraClock, Px4Bridge
 from sim_world.px4_bridge.geodesy import HomePoint, magnetic_field_ned_gauss
 from sim_world.px4_bridge.link import (
-    SIMULATOR_BASE_PORT,
     Px4DisconnectedError,
     SimulatorLinkError,
     SimulatorServer,
@@ -48,8 +52,6 @@ log = logging.getLogger(__name__)
 PX4_QUAD = SITL_QUAD
 """The project's quadrotor with compliant landing legs (3 mm static deflection, damped)."""
 PHYSICS_HZ = 500.0  # two physics steps per 4 ms sensor tick
-OFFBOARD_PORT_BASE = 14540
-VIDEO_PORT_BASE = 8080
 MAGNETIC_MODEL_YEAR = 2025.5
 MAX_SPEED_FACTOR = 10.0
 """For PX4's timeouts, `--speed max` counts as 10× real time (measured here: 2.7× with the 224 px
@@ -109,7 +111,7 @@ class Px4SimConfig:
     @property
     def simulator_port(self) -> int:
         """The TCP port the bridge listens on for PX4 (0: any free one)."""
-        return 0 if self.free_ports else SIMULATOR_BASE_PORT + self.instance
+        return 0 if self.free_ports else PX4_SIMULATOR_TCP + self.instance
 
     @property
     def mavlink_url(self) -> str:
@@ -117,13 +119,13 @@ class Px4SimConfig:
         port = (
             self.mavlink_remote_port
             if self.mavlink_remote_port is not None
-            else OFFBOARD_PORT_BASE + self.instance
+            else PX4_OFFBOARD_REMOTE_UDP + self.instance
         )
         return f"udpin://0.0.0.0:{port}"
 
     @property
     def http_video_port(self) -> int:
-        return VIDEO_PORT_BASE + self.instance if self.video_port is None else self.video_port
+        return SIM_VEHICLE_VIDEO_HTTP + self.instance if self.video_port is None else self.video_port
 
 
 @dataclass(frozen=True)

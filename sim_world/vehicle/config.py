@@ -14,16 +14,13 @@ from typing import Annotated
 
 from pydantic import Field
 
+from drone_inspect_core.ports import PX4_OFFBOARD_LOCAL_UDP, PX4_OFFBOARD_REMOTE_UDP, SIM_VEHICLE_VIDEO_HTTP
 from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.sim_speed import MAX_SPEED, SimSpeed, parse_sim_speed
 from drone_inspect_core.vehicle_limits import VehicleLimits
 from sim_world.vehicle.battery import BatteryConfig
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.telemetry import HomePoint
-
-PX4_OFFBOARD_REMOTE_PORT = 14540
-PX4_OFFBOARD_LOCAL_PORT = 14580
-VIDEO_HTTP_PORT = 8080
 
 
 @dataclass(frozen=True)
@@ -81,15 +78,15 @@ class SimVehicleConfig:
 
     @property
     def mavlink_remote_port(self) -> int:
-        return PX4_OFFBOARD_REMOTE_PORT + self.instance if self.remote_port is None else self.remote_port
+        return PX4_OFFBOARD_REMOTE_UDP + self.instance if self.remote_port is None else self.remote_port
 
     @property
     def mavlink_local_port(self) -> int:
-        return PX4_OFFBOARD_LOCAL_PORT + self.instance if self.local_port is None else self.local_port
+        return PX4_OFFBOARD_LOCAL_UDP + self.instance if self.local_port is None else self.local_port
 
     @property
     def http_video_port(self) -> int:
-        return VIDEO_HTTP_PORT + self.instance if self.video_port is None else self.video_port
+        return SIM_VEHICLE_VIDEO_HTTP + self.instance if self.video_port is None else self.video_port
 
     @property
     def system_id(self) -> int:

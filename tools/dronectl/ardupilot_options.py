@@ -11,7 +11,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from controller.missions.schema import ARDUPILOT_SITL, ArduPilotSpec, Mission
+from controller.missions.schema import ArduPilotSpec, Mission
+from controller.missions.vehicles import ARDUPILOT_SITL
 
 FOLDER_HELP = (
     "ardupilot-sitl: the ArduCopter SITL folder (default: $ARDUPILOT_SITL_DIR, else ../shared/ardupilot-sitl)"

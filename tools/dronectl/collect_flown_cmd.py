@@ -2,6 +2,7 @@
 
     dronectl collect --vehicle sim-mavlink --kind gauge --goal scene --out data/flown
     dronectl collect --vehicle px4-sitl --kind valve --goal scene --out data/px4 --n-per-sector 40
+    dronectl collect --vehicle ardupilot-sitl --kind gauge --goal scene --out data/ardupilot
     dronectl collect --vehicle udpin://0.0.0.0:14540 --camera http://drone:8080/stream.mjpg \\
         --camera-file camera.yaml --kind gauge --goal here --distance-m 2.0 --box-m 0.6 --out data/mine
     dronectl collect --resume --out data/mine --vehicle ... (the same options: goes on where it stopped)
@@ -19,7 +20,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from controller.collection.config import Box3, FlownCollectConfig, Settling, SimOptions
+from controller.collection.config import SIMULATED, Box3, FlownCollectConfig, Settling, SimOptions
+from controller.missions.vehicles import ARDUPILOT_SITL, PX4_SITL
+from dronectl.ardupilot_options import add_ardupilot_options, resolve_ardupilot_dir
 
 
 def _goal_box(text: str) -> tuple[float, float, float, float]:
@@ -39,7 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
-        "--vehicle", required=True, help="sim-mavlink, px4-sitl or a MAVLink URL (udpin://0.0.0.0:14540)"
+        "--vehicle",
+        required=True,
+        help=f"{', '.join(SIMULATED)} or a MAVLink URL (udpin://0.0.0.0:14540)",
     )
     p.add_argument("--camera", default=None, help="a real vehicle's camera stream URL (simulated: its own)")
     p.add_argument(
@@ -136,6 +141,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--px4", type=Path, default=None, help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)"
     )
     p.add_argument("--px4-speed", default="max", help="px4-sitl: simulated s per wall s, or max (default)")
+    add_ardupilot_options(p, speed_default="max")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
@@ -152,7 +158,8 @@ def config_from(args: argparse.Namespace) -> FlownCollectConfig:
         min_altitude_m=args.min_altitude_m, on_loss=args.on_loss, loss_wait_s=args.loss_wait_s,
         resume=args.resume, seed=args.seed, progress=not args.no_progress,
         sim=SimOptions(scene_file=args.scene, scene_seed=args.scene_seed, sim_speed=args.sim_speed,
-                       px4_dir=args.px4, px4_speed=args.px4_speed),
+                       px4_dir=args.px4, px4_speed=args.px4_speed, ardupilot_dir=args.ardupilot,
+                       ardupilot_speed=args.ardupilot_speed),
     )  # fmt: skip
 
 
@@ -172,10 +179,12 @@ def main(argv: list[str]) -> int:
     name = "dronectl collect"
     try:
         config = config_from(args)
-        if config.vehicle == "px4-sitl":
+        if config.vehicle == PX4_SITL:  # a missing autopilot folder is named before anything starts
             from sim_world.px4_bridge.px4_process import find_px4_dir
 
             find_px4_dir(None if args.px4 is None else str(args.px4))
+        if config.vehicle == ARDUPILOT_SITL:
+            resolve_ardupilot_dir(args.ardupilot)
         result = collect_flown(config)
     except (ValueError, ConfigFileError, GoalFileError, ResumeError, OutputDirError, MissionFileError) as exc:
         print(f"{name}: {exc}", file=sys.stderr)  # bad input: nothing flew

@@ -10,7 +10,8 @@ from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 from controller.missions.kits.base import FlightKit, LoadedModels
-from controller.missions.schema import ARDUPILOT_SITL, PX4_SITL, SIM, SIM_MAVLINK, Mission
+from controller.missions.schema import Mission
+from controller.missions.vehicles import ARDUPILOT_SITL, PX4_SITL, SIM, SIM_MAVLINK
 from drone_inspect_core.signing import SigningKey
 from flight.safety import SafetyLimits
 

@@ -21,22 +21,22 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, OpenedVehicle
+from controller.missions.kits.base import FlightKit, LoadedModels, OpenedVehicle
 from controller.missions.kits.simulated import (
     SIM_HFOV_DEG,
     SimTruth,
     SimulatedVehicle,
     new_system_id,
+    relay_for,
     simulated_mavlink_kit,
     simulated_world_fields,
+    stream_camera_for,
 )
 from controller.missions.schema import Mission
 from controller.missions.setup import start_offset_for
 from drone_inspect_core.ports import free_port
 from flight.ardupilot.vehicle import ArduPilotConfig, ArduPilotVehicle
-from flight.relay import MavlinkRelay
 from flight.sim_launcher import SimulatorProcess
-from perception.stream_camera import StreamCamera
 from sim_world.ardupilot_bridge.ardupilot_process import (
     ardupilot_instance,
     find_ardupilot_dir,
@@ -92,15 +92,7 @@ def open_ardupilot_sitl(mission: Mission, out_dir: Path) -> Iterator[SimulatedVe
         instance = stack.enter_context(ardupilot_instance(mission.ardupilot.instance))
         client_port = free_port("udp")
         # The relay binds a free port first; ArduPilot sends its MAVLink there, locked to its system id.
-        tlog = stack.enter_context(
-            MavlinkRelay(
-                0,
-                client_port,
-                out_dir / TLOG_NAME,
-                faults=mission.faults.link_faults(),
-                vehicle_system_id=system_id,
-            )
-        )
+        tlog = relay_for(stack, mission, out_dir, system_id, 0, client_port)
         config = ardupilot_sim_config(mission, instance, out_dir, system_id, tlog.listen_address[1])
         sim = stack.enter_context(
             SimulatorProcess(
@@ -123,7 +115,7 @@ def open_ardupilot_sitl(mission: Mission, out_dir: Path) -> Iterator[SimulatedVe
                 )
             )
         )
-        camera = stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
+        camera = stream_camera_for(stack, sim)
         o = config.start_offset
         assert o is not None
         start = o

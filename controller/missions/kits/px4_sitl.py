@@ -24,14 +24,16 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, OpenedVehicle
+from controller.missions.kits.base import FlightKit, LoadedModels, OpenedVehicle
 from controller.missions.kits.simulated import (
     SIM_HFOV_DEG,
     SimTruth,
     SimulatedVehicle,
     new_system_id,
+    relay_for,
     simulated_mavlink_kit,
     simulated_world_fields,
+    stream_camera_for,
     vehicle_limits_for,
 )
 from controller.missions.schema import Mission
@@ -39,10 +41,8 @@ from controller.missions.setup import start_offset_for
 from drone_inspect_core.ports import free_port
 from drone_inspect_core.vehicle_limits import VehicleLimits
 from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
-from flight.relay import MavlinkRelay
 from flight.safety import SafetyLimits
 from flight.sim_launcher import SimulatorProcess
-from perception.stream_camera import StreamCamera
 from sim_world.px4_bridge.bridge import PX4_CLOCK_OFFSET_US, BridgeTiming
 from sim_world.px4_bridge.instances import px4_instance
 from sim_world.px4_bridge.px4_process import find_px4_dir
@@ -104,15 +104,7 @@ def open_px4_sitl(
         instance = stack.enter_context(px4_instance(mission.px4.instance))
         mavsdk_port = free_port("udp")
         # The relay binds first (a free port): PX4's link sends there.
-        tlog = stack.enter_context(
-            MavlinkRelay(
-                0,
-                mavsdk_port,
-                out_dir / TLOG_NAME,
-                faults=mission.faults.link_faults(),
-                vehicle_system_id=system_id,
-            )
-        )
+        tlog = relay_for(stack, mission, out_dir, system_id, 0, mavsdk_port)
         vehicle_limits = vehicle_limits_for(limits)
         config = px4_sim_config(mission, instance, out_dir, system_id, tlog.listen_address[1], vehicle_limits)
         sim = stack.enter_context(
@@ -133,7 +125,7 @@ def open_px4_sitl(
                 )
             )
         )
-        camera = stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
+        camera = stream_camera_for(stack, sim)
         opened = OpenedVehicle(
             vehicle, camera,
             info={

@@ -22,14 +22,16 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import asdict
 from pathlib import Path
 
-from controller.missions.kits.base import TLOG_NAME, FlightKit, LoadedModels, OpenedVehicle
+from controller.missions.kits.base import FlightKit, LoadedModels, OpenedVehicle
 from controller.missions.kits.simulated import (
     SIM_HFOV_DEG,
     SimTruth,
     SimulatedVehicle,
     new_system_id,
+    relay_for,
     simulated_mavlink_kit,
     simulated_world_fields,
+    stream_camera_for,
     vehicle_limits_for,
 )
 from controller.missions.schema import Mission
@@ -39,10 +41,8 @@ from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.vehicle_limits import VehicleLimits
 from drone_inspect_core.world_options import StartPose
 from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
-from flight.relay import MavlinkRelay
 from flight.safety import SafetyLimits
 from flight.sim_launcher import SimulatorProcess
-from perception.stream_camera import StreamCamera
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.serve import READY_PREFIX as SIM_READY_PREFIX
 from sim_world.vehicle.serve import SimVehicleRun, secret_json
@@ -109,16 +109,7 @@ def open_sim_mavlink(
         check_free([("tcp", http, "sim-vehicle video")])
     with ExitStack() as stack:
         # The relay binds first: the sim-vehicle streams to the port it got.
-        tlog = stack.enter_context(
-            MavlinkRelay(
-                relay_port,
-                mavsdk_port,
-                out_dir / TLOG_NAME,
-                faults=mission.faults.link_faults(),
-                vehicle_system_id=system_id,
-                signing_key=key,
-            )
-        )
+        tlog = relay_for(stack, mission, out_dir, system_id, relay_port, mavsdk_port, signing_key=key)
         vehicle_limits = vehicle_limits_for(limits)
         run = sim_vehicle_run(mission, start, system_id, tlog.listen_address[1], key, vehicle_limits)
         sim = stack.enter_context(
@@ -137,7 +128,7 @@ def open_sim_mavlink(
                 )
             )
         )
-        camera = stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
+        camera = stream_camera_for(stack, sim)
         opened = OpenedVehicle(
             vehicle, camera,
             info={

@@ -11,10 +11,13 @@ import json
 import logging
 import secrets
 import urllib.request
+from contextlib import ExitStack
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from controller.missions.kits.base import (
+    TLOG_NAME,
     FlightKit,
     LoadedModels,
     OpenedVehicle,
@@ -25,10 +28,14 @@ from controller.missions.kits.base import (
 from controller.missions.schema import Mission
 from controller.missions.setup import scene_config_for, wind_config_for
 from controller.missions.truth import TrueTarget, TruthFollower
+from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.vehicle_limits import VehicleLimits
 from drone_inspect_core.vocabulary import colour_name
 from drone_inspect_core.world_options import StartPose
+from flight.relay import MavlinkRelay
 from flight.safety import SafetyLimits
+from flight.sim_launcher import SimulatorProcess
+from perception.stream_camera import StreamCamera
 from sim_world.rendering.camera import CameraConfig
 from sim_world.scene.config import SceneConfig
 from sim_world.scene.sampling import sample_scene
@@ -161,6 +168,34 @@ class SimulatedVehicle:
         start reaches: (right, up) metres in the start's heading frame (same distance from the wall)."""
         height_m = sample_scene(self.scene, self.seed).target.height_m - self.ground_height_m()
         return -self.start.right_m, height_m - climb_m
+
+
+def relay_for(
+    stack: ExitStack,
+    mission: Mission,
+    out_dir: Path,
+    system_id: int,
+    relay_port: int,
+    client_port: int,
+    signing_key: SigningKey | None = None,
+) -> MavlinkRelay:
+    """The .tlog relay between a simulated vehicle and its client, open in `stack`: it binds first (the
+    simulator is told the port it got), applies the mission's link faults and takes only `system_id`."""
+    return stack.enter_context(
+        MavlinkRelay(
+            relay_port,
+            client_port,
+            out_dir / TLOG_NAME,
+            faults=mission.faults.link_faults(),
+            vehicle_system_id=system_id,
+            signing_key=signing_key,
+        )
+    )
+
+
+def stream_camera_for(stack: ExitStack, sim: SimulatorProcess) -> StreamCamera:
+    """The simulator's MJPEG stream as the flight's camera, open in `stack`."""
+    return stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
 
 
 def simulated_mavlink_kit(mission: Mission, models: LoadedModels | None, sim: SimulatedVehicle) -> FlightKit:
