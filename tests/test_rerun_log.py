@@ -46,7 +46,7 @@ def test_a_recorded_mission_reads_back_with_every_step_on_simulated_time(tmp_pat
     result = run_mission(parse_mission(MISSION), tmp_path / "report", media=False, rerun_path=rrd)
     assert result.outcome == "centred" and result.steps >= 1
     report = json.loads((tmp_path / "report" / "report.json").read_text())
-    steps = report["steps"]
+    steps = report["instructions"][0]["records"]
     data = _columns(rrd)
 
     images = data["camera/image"]
@@ -98,7 +98,7 @@ def test_an_existing_recording_is_refused_before_anything_flies(tmp_path: Path) 
         run_mission(parse_mission(MISSION), tmp_path / "report", media=False, rerun_path=rrd)
     assert rrd.read_bytes() == b"earlier flight"
     report = json.loads((tmp_path / "report" / "report.json").read_text())
-    assert "never overwritten" in report["error"] and not report.get("steps")
+    assert "never overwritten" in report["error"] and report["instructions"] == []
     with pytest.raises(RerunFileError, match=r"\.rrd"):
         check_rerun_path(tmp_path / "flight.txt")
     with pytest.raises(RerunFileError, match="does not exist"):
@@ -116,7 +116,7 @@ def test_a_failing_recording_never_costs_the_flight(tmp_path: Path, monkeypatch:
     result = run_mission(parse_mission(MISSION), tmp_path / "report", media=False, rerun_path=rrd)
     assert result.outcome == "centred" and result.error is None
     report = json.loads((tmp_path / "report" / "report.json").read_text())
-    assert report["status"] == "finished" and len(report["steps"]) == result.steps + 1
+    assert report["status"] == "finished" and len(report["instructions"][0]["records"]) == result.steps + 1
 
 
 def test_benchmark_missions_record_each_mission_in_its_report_folder(tmp_path: Path) -> None:
@@ -128,5 +128,34 @@ def test_benchmark_missions_record_each_mission_in_its_report_folder(tmp_path: P
     folders = sorted((tmp_path / "b").iterdir())
     assert len(folders) == 2 and summary["planners"]["classic"]["missions"] == 2
     for folder in folders:
-        steps = json.loads((folder / "report.json").read_text())["steps"]
+        steps = json.loads((folder / "report.json").read_text())["instructions"][0]["records"]
         assert _columns(folder / MISSION_RRD)["camera/image"]["step"] == [s["index"] for s in steps]
+
+
+def test_each_instruction_of_a_flight_is_visible_in_the_recording(tmp_path: Path) -> None:
+    """Three instructions, one flight (fakes): each instruction's text on its own `instruction` time, every
+    frame on the instruction it served, the `step` time counted over the whole flight."""
+    from fake_vehicle import FakeVehicle
+    from mission_fakes import FakeMultiTargetDetector
+    from test_flight_session import LIMITS, WALL, kit_for
+
+    from controller.missions.runner import fly_kit
+
+    vehicle = FakeVehicle.at_pose(east_m=-0.3, up_m=0.2)
+    mission = parse_mission(
+        {
+            "name": "three",
+            "planner": "classic",
+            "instructions": ["the gauge", "the red valve", "the switch box"],
+        }
+    )
+    kit = kit_for(vehicle, FakeMultiTargetDetector(vehicle, WALL))
+    result = fly_kit(kit, mission, tmp_path, LIMITS, media=False, rerun_path=tmp_path / "flight.rrd")
+    assert result.passed, result.failures
+    data = _columns(tmp_path / "flight.rrd")
+    said = sorted(zip(data["instruction"]["instruction"], data["instruction"]["TextLog:text"], strict=True))
+    assert said == [(1, ["1: the gauge"]), (2, ["2: the red valve"]), (3, ["3: the switch box"])]
+    report = json.loads((tmp_path / "report.json").read_text())
+    served = [entry["index"] for entry in report["instructions"] for _ in entry["records"]]
+    images = data["camera/image"]  # chunks come back in no fixed order: by step
+    assert sorted(zip(images["step"], images["instruction"], strict=True)) == list(enumerate(served))

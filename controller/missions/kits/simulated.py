@@ -27,6 +27,7 @@ from controller.missions.kits.base import (
 )
 from controller.missions.schema import Mission
 from controller.missions.setup import scene_config_for, wind_config_for
+from controller.missions.truth import TrueTarget, TruthFollower
 from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.vehicle_limits import VehicleLimits
 from drone_inspect_core.vocabulary import colour_name
@@ -43,6 +44,9 @@ log = logging.getLogger(__name__)
 
 SIM_IMAGE_PX = 224
 SIM_HFOV_DEG = CameraConfig().hfov_deg  # the simulators' camera: square, so the same vertically
+SETUP_READ_TIMEOUT_S = 10.0
+"""The one truth read a kit needs before takeoff (the ground height) waits this long: at 1 s a benchmark
+mission under a load average of 20 failed to start on it."""
 PX4_MIN_TAKEOFF_ALT_M = 0.5
 """PX4 refuses MIS_TAKEOFF_ALT below 0.5 m: a lower start pose is flown from 0.5 m (a few px off the draw)."""
 
@@ -69,14 +73,19 @@ class SimTruth:
             return None
         return (float(target["offset_px"][0]), float(target["offset_px"][1])) if target["in_view"] else None
 
-    def targets_offsets(self) -> list[tuple[float, float] | None] | None:
-        """Every target's true offset (None: out of view), the named one first; None if unreachable or
-        the simulator publishes only the named target (an older sim-vehicle)."""
+    def targets(self) -> list[TrueTarget] | None:
+        """Every target's kind, colour and true offset (None: out of view), the named one first; None if
+        unreachable or the simulator publishes only the named target (an older sim-vehicle)."""
         try:
-            targets = _get_json(self.url)["truth"]["targets"]
-            return [(float(t["offset_px"][0]), float(t["offset_px"][1])) if t["in_view"] else None
-                    for t in targets]  # fmt: skip
-        except (OSError, ValueError, KeyError, TypeError, IndexError) as exc:
+            return [
+                TrueTarget(
+                    t.get("kind"),
+                    t.get("attribute"),
+                    (float(t["offset_px"][0]), float(t["offset_px"][1])) if t["in_view"] else None,
+                )
+                for t in _get_json(self.url)["truth"]["targets"]
+            ]
+        except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
             log.warning("no truth of every target from %s: %s", self.url, exc)
             return None
 
@@ -89,7 +98,9 @@ class SimTruth:
             return None
 
     def ground_height_m(self) -> float:
-        return float(_get_json(self.url)["truth"]["drone"]["position_enu_m"][2])
+        """Read once, before takeoff: given the time a loaded machine may need to answer (the per-step
+        reads keep their short timeout: they must not stall the loop)."""
+        return float(_get_json(self.url, SETUP_READ_TIMEOUT_S)["truth"]["drone"]["position_enu_m"][2])
 
     def frame(self) -> dict[str, Any] | None:
         """The latest frame's whole truth (`sim_world.rendering.video.frame_truth`: the target in pixels,
@@ -194,18 +205,18 @@ def simulated_mavlink_kit(mission: Mission, models: LoadedModels | None, sim: Si
     instruction, query = named_target(
         mission, [(t.kind, colour_name(t.bezel_colour)) for t in sampled.targets]
     )
-    truth = sim.truth
-    return FlightKit(
+    truth = TruthFollower(sim.truth.targets)  # judging only: the current instruction's target
+    climb_m = sim.takeoff_climb_m()  # the simulator's truth read first, before the models load
+    return FlightKit.judged_by(
+        truth,
         vehicle=sim.opened.vehicle,
         camera=sim.opened.camera,
         detector=image_detector_for(mission, models),
         planner=planner_for(mission, models, truth.offset_px),
         instruction=instruction,
         target=query,
-        truth_probe=truth.offset_px,
-        truth_extremes=truth.extremes,
-        targets_truth=truth.targets_offsets,
-        takeoff_altitude_m=sim.takeoff_climb_m(),
+        truth_extremes=sim.truth.extremes,
+        takeoff_altitude_m=climb_m,
         info={
             "scene_seed": mission.scene.seed,
             "target_kind": sampled.target.kind,
