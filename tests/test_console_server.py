@@ -53,9 +53,12 @@ class FakeOperator:
 @pytest.fixture(scope="module")
 def served(tmp_path_factory: pytest.TempPathFactory):
     root = tmp_path_factory.mktemp("session")
-    (root / "01-centre-the-gauge").mkdir()
-    (root / "01-centre-the-gauge" / "report.json").write_text('{"outcome": "centred"}')
+    entry = {"instruction": "centre the gauge", "outcome": "centred"}
+    report = {"outcome": "centred", "instructions": [entry]}
+    (root / "report.json").write_text(json.dumps(report))
     (root / "secret.txt").write_text("not for pages")
+    (root / "sub").mkdir()
+    (root / "sub" / "report.json").write_text("{}")
     operator = FakeOperator(root)
     hub = Hub()
     token = new_token()
@@ -166,10 +169,14 @@ def test_bad_messages_get_one_line_and_change_nothing(served, message: str, said
     assert (operator.commands, operator.instructions) == before
 
 
-def test_a_page_fetches_the_reports_and_nothing_else(served) -> None:
+def test_a_page_fetches_the_report_and_each_instruction_and_nothing_else(served) -> None:
     url, _, _, _ = served
-    status, body = _get(url + "reports/01-centre-the-gauge/report.json")
-    assert status == 200 and json.loads(body) == {"outcome": "centred"}
-    for name in ("reports/01-centre-the-gauge/nothing.json", "reports/../secret.txt", "reports/x/secret.txt",
-                 "reports/%2e%2e/secret.txt"):  # fmt: skip
-        assert _get(url + name)[0] == 404, name
+    status, body = _get(url + "reports/report.json")
+    assert status == 200 and json.loads(body)["outcome"] == "centred"
+    status, body = _get(url + "reports/instructions/1")
+    assert status == 200 and json.loads(body) == {"instruction": "centre the gauge", "outcome": "centred"}
+    for name in ("reports/instructions/2", "reports/instructions/0", "reports/instructions/-1",
+                 "reports/camera.gif", "reports/secret.txt", "reports/../secret.txt",
+                 "reports/sub/report.json",
+                 "reports/%2e%2e/secret.txt", "reports/%2Fetc%2Fpasswd"):  # fmt: skip
+        assert _get(url + name)[0] in (403, 404), name

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 import secrets
 import threading
@@ -31,7 +32,7 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 from starlette.applications import Starlette
 from starlette.exceptions import HTTPException
 from starlette.requests import Request
-from starlette.responses import FileResponse, HTMLResponse, Response
+from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
@@ -44,7 +45,7 @@ MAX_MESSAGE_BYTES = 4096
 START_TIMEOUT_S = 10.0
 STATIC_FILES = {"console.js": "text/javascript", "console.css": "text/css"}
 REPORT_FILES = ("report.json", "camera.gif", "trajectory.png")
-"""What a page may fetch of a session's report folder: the reports and their pictures, nothing else."""
+"""What a page may fetch of the session's report folder: the report and its pictures, nothing else."""
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]
@@ -99,7 +100,7 @@ class Operator(Protocol):
         ...
 
     def report_dir(self) -> Path:
-        """The session's report folder (the page links the instructions' reports in it)."""
+        """The session's report folder (report.json: the page links each instruction's entry in it)."""
         ...
 
 
@@ -159,12 +160,23 @@ def create_app(token: str, hub: Hub, operator: Operator) -> App:
         return Response(_static_text(name), media_type=STATIC_FILES[name])
 
     async def report(request: Request) -> Response:
-        folder, name = request.path_params["folder"], request.path_params["name"]
-        root = operator.report_dir().resolve()
-        path = (root / folder / name).resolve()
-        if name not in REPORT_FILES or path.parent.parent != root or not path.is_file():
+        name = request.path_params["name"]
+        path = operator.report_dir() / name
+        if name not in REPORT_FILES or not path.is_file():
             raise HTTPException(404)
-        return FileResponse(path)
+        return FileResponse(path, headers={"Cache-Control": "no-store"})
+
+    async def instruction(request: Request) -> Response:
+        """One instruction's entry of report.json (the page's log links each instruction here)."""
+        number = request.path_params["number"]
+        try:
+            entries = json.loads((operator.report_dir() / "report.json").read_text())["instructions"]
+            entry = entries[number - 1] if number >= 1 else None
+        except (OSError, ValueError, KeyError, IndexError, TypeError):
+            entry = None
+        if not isinstance(entry, dict):
+            raise HTTPException(404)
+        return JSONResponse(entry, headers={"Cache-Control": "no-store"})
 
     async def socket(websocket: WebSocket) -> None:
         await _serve_page(websocket, hub, operator)
@@ -172,7 +184,8 @@ def create_app(token: str, hub: Hub, operator: Operator) -> App:
     routes = [
         Route("/", page),
         Route("/static/{name}", static),
-        Route("/reports/{folder}/{name}", report),
+        Route("/reports/instructions/{number:int}", instruction),
+        Route("/reports/{name}", report),
         WebSocketRoute("/ws", socket),
     ]
     app = Starlette(routes=[Mount(f"/c/{token}", routes=routes)])

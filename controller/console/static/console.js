@@ -7,6 +7,7 @@ const $ = (id) => document.getElementById(id);
 const canvas = $("video");
 const ctx = canvas.getContext("2d");
 const VIDEO_LOST_MS = 1500;
+const STALE_FRAMES = 3;
 
 const state = {
   socket: null, page: null, holder: null, hello: null, flying: false, activity: "idle",
@@ -221,6 +222,10 @@ function draw() {
   ctx.beginPath(); ctx.arc(cx, cy, 4, 0, 2 * Math.PI); ctx.fill();
   if (o && o.detections) {
     ctx.font = "14px system-ui, sans-serif";
+    // Detections of an older frame (the loop flies between its looks): drawn fainter and dashed.
+    const stale = h.n - o.frame > STALE_FRAMES;
+    ctx.globalAlpha = stale ? 0.55 : 1.0;
+    if (stale) ctx.setLineDash([6, 4]);
     for (const d of o.detections) {
       const [u0, v0, u1, v1] = d.bbox_px.map((x) => x * scale);
       ctx.strokeStyle = d.named ? "#ffd23f" : "#4fc3f7";
@@ -239,6 +244,8 @@ function draw() {
         ctx.beginPath(); ctx.moveTo(cx, cy); ctx.lineTo(u, v); ctx.stroke();
       }
     }
+    ctx.globalAlpha = 1.0;
+    ctx.setLineDash([]);
     const age = h.n - o.frame;
     ctx.fillStyle = "rgba(0,0,0,0.6)"; ctx.fillRect(0, canvas.height - 22, canvas.width, 22);
     ctx.fillStyle = "#e6e9ee";
