@@ -228,6 +228,11 @@ class PyBulletVehicle(Vehicle):
         if self.world.autopilot.armed:
             self._autopilot_call("disarm()", self.world.autopilot.disarm)
 
+    def kill(self, timeout_s: float | None = None) -> None:
+        """Stop the rotors at once (the autopilot's forced disarm): in the air the drone falls."""
+        self._offboard = False
+        self._autopilot_call("kill()", lambda: self.world.autopilot.disarm(force=True))
+
     def close(self) -> None:
         if self._owns_world:
             self.world.close()

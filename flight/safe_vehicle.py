@@ -164,6 +164,10 @@ class SafeVehicle(Vehicle):
     def disarm(self, timeout_s: float | None = None) -> None:
         self.inner.disarm(timeout_s or self.limits.timeouts.disarm_s)
 
+    def kill(self, timeout_s: float | None = None) -> None:
+        self._leave_offboard()
+        self.inner.kill(timeout_s or self.limits.timeouts.disarm_s)
+
     def send_land(self) -> bool:
         self._leave_offboard()
         return self.inner.send_land()

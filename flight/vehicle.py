@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable
 from types import TracebackType
 
-from flight.errors import FlightTimeoutError
+from flight.errors import CommandDeniedError, FlightTimeoutError
 from flight.types import Telemetry, VelocityBody
 
 
@@ -89,6 +89,12 @@ class Vehicle(abc.ABC):
     @abc.abstractmethod
     def close(self) -> None:
         """Release the link and every thread or resource the backend holds. Idempotent."""
+
+    def kill(self, timeout_s: float | None = None) -> None:
+        """Stop the motors now, in the air too (MAVLink's forced disarm, 21196): an operator's last resort,
+        after which a flying vehicle falls. Returns once telemetry shows it disarmed. A backend that cannot
+        raises `CommandDeniedError`."""
+        raise CommandDeniedError("kill()", "UNSUPPORTED", f"{type(self).__name__} cannot stop its motors")
 
     def status_texts(self) -> list[str]:
         """Messages the autopilot sent (STATUSTEXT), oldest first; empty where there are none."""

@@ -169,6 +169,16 @@ class FakeVehicle(Vehicle):
         self.calls.append("disarm")
         self.armed = False
 
+    def kill(self, timeout_s: float | None = None) -> None:
+        """Motors off at once: a flying fake drops to the ground."""
+        self.calls.append("kill")
+        self.armed = False
+        self.mode = FlightMode.READY
+        self.setpoint = None
+        self.position[2] = 0.0
+        self.velocity = [0.0, 0.0, 0.0]
+        self.in_air = False
+
     def close(self) -> None:
         self.calls.append("close")
         self.closed = True

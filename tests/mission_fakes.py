@@ -3,16 +3,20 @@
 With `fake_vehicle.FakeVehicle.at_pose` (a kinematic point in front of the target),
 `FakeCamera` returns blank frames and `FakeDetector` derives the target's pixel position
 from the fake vehicle's position by a pinhole relation, so the loop can be run
-closed-loop without physics or rendering. `FakePlanner` replays a script of actions.
+closed-loop without physics or rendering (`FakeMultiTargetDetector`: several targets on
+the fake wall, with their truth as a simulator kit gives it). `FakePlanner` replays a
+script of actions.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 
 import numpy as np
 from fake_vehicle import FakeVehicle
 
+from controller.missions.truth import TrueTarget
 from controller.planning.actions import ALL_ACTIONS, Action
 from controller.planning.planners import Observation, Plan
 from perception.camera import Camera
@@ -87,3 +91,55 @@ class FakePlanner:
         self.calls += 1
         action: Action = ALL_ACTIONS[index]
         return Plan(action, tuple(float(abs(i - index)) for i in range(len(ALL_ACTIONS))))
+
+
+@dataclass(frozen=True)
+class WallTarget:
+    kind: str
+    attribute: str
+    east_m: float  # right of the centred pose's target
+    up_m: float
+    confidence: float
+
+
+class FakeMultiTargetDetector:
+    """Several targets on the fake wall seen from the fake vehicle (pinhole, `PX_PER_M`), strongest first.
+
+    `gone_after` (call number) hides every target from then on: a target seen, then lost.
+    """
+
+    def __init__(
+        self, vehicle: FakeVehicle, targets: list[WallTarget], gone_after: int | None = None
+    ) -> None:
+        self.vehicle = vehicle
+        self.targets = targets
+        self.gone_after = gone_after
+        self.calls = 0
+
+    def detect_all(self, image: np.ndarray) -> list[Detection]:
+        call, self.calls = self.calls, self.calls + 1
+        if self.gone_after is not None and call >= self.gone_after:
+            return []
+        found = []
+        for t in self.targets:
+            u = IMAGE_SIZE / 2 + (t.east_m - self.vehicle.east_m) * PX_PER_M
+            v = IMAGE_SIZE / 2 + (self.vehicle.up_m - t.up_m) * PX_PER_M
+            if 0 <= u < IMAGE_SIZE and 0 <= v < IMAGE_SIZE:
+                box = (u - 10, v - 10, u + 10, v + 10)
+                found.append(Detection(box, (u, v), t.confidence, t.kind, t.attribute))
+        return sorted(found, key=lambda d: -d.confidence)
+
+    def detect(self, image: np.ndarray) -> Detection | None:
+        found = self.detect_all(image)
+        return found[0] if found else None
+
+    def offset_px(self, target: WallTarget) -> tuple[float, float] | None:
+        """Where `target` is from the image centre now (None: out of the image)."""
+        du = (target.east_m - self.vehicle.east_m) * PX_PER_M
+        dv = (self.vehicle.up_m - target.up_m) * PX_PER_M
+        inside = abs(du) < IMAGE_SIZE / 2 and abs(dv) < IMAGE_SIZE / 2
+        return (du, dv) if inside else None
+
+    def truth(self) -> list[TrueTarget]:
+        """Every target's truth (the first is the scene's named one), as a simulator kit gives it."""
+        return [TrueTarget(t.kind, t.attribute, self.offset_px(t)) for t in self.targets]

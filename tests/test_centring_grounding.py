@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import pytest
 from fake_vehicle import FakeVehicle
-from mission_fakes import IMAGE_SIZE, PX_PER_M, FakeCamera, FakePlanner
+from mission_fakes import IMAGE_SIZE, PX_PER_M, FakeCamera, FakeMultiTargetDetector, FakePlanner, WallTarget
 
 from controller.missions.schema import Expectations
 from controller.planning.actions import ALL_ACTIONS, label_from_offset
@@ -17,47 +15,6 @@ from controller.planning.planners import ClassicPlanner, Observation
 from perception.types import Detection
 
 EPSILON = 10.0
-
-
-@dataclass(frozen=True)
-class WallTarget:
-    kind: str
-    attribute: str
-    east_m: float  # right of the centred pose's target
-    up_m: float
-    confidence: float
-
-
-class FakeMultiTargetDetector:
-    """Several targets on the fake wall seen from the fake vehicle (pinhole, `PX_PER_M`), strongest first.
-
-    `gone_after` (call number) hides every target from then on: a target seen, then lost.
-    """
-
-    def __init__(
-        self, vehicle: FakeVehicle, targets: list[WallTarget], gone_after: int | None = None
-    ) -> None:
-        self.vehicle = vehicle
-        self.targets = targets
-        self.gone_after = gone_after
-        self.calls = 0
-
-    def detect_all(self, image: np.ndarray) -> list[Detection]:
-        call, self.calls = self.calls, self.calls + 1
-        if self.gone_after is not None and call >= self.gone_after:
-            return []
-        found = []
-        for t in self.targets:
-            u = IMAGE_SIZE / 2 + (t.east_m - self.vehicle.east_m) * PX_PER_M
-            v = IMAGE_SIZE / 2 + (self.vehicle.up_m - t.up_m) * PX_PER_M
-            if 0 <= u < IMAGE_SIZE and 0 <= v < IMAGE_SIZE:
-                box = (u - 10, v - 10, u + 10, v + 10)
-                found.append(Detection(box, (u, v), t.confidence, t.kind, t.attribute))
-        return sorted(found, key=lambda d: -d.confidence)
-
-    def detect(self, image: np.ndarray) -> Detection | None:
-        found = self.detect_all(image)
-        return found[0] if found else None
 
 
 GAUGE = WallTarget("gauge", "blue", 0.0, 0.0, 0.95)  # the strongest, centred at the start pose

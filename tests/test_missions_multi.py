@@ -70,7 +70,7 @@ def test_a_centring_on_another_target_is_a_wrong_target_and_never_passes() -> No
 
 def test_multi_target_benchmark_missions_name_the_named_target_and_absent_ones_expect_not_found() -> None:
     today = benchmark_missions(BenchmarkConfig(n=3, seed=1), "classic", frozenset())
-    assert all(m.instruction is None and m.targets == 1 for m in today)  # targets 1: today's missions
+    assert all(m.instructions == () and m.targets == 1 for m in today)  # targets 1: today's missions
     config = BenchmarkConfig.of({"targets": 3, "twins": True}, n=8, seed=1, absent=0.4)
     missions = benchmark_missions(config, "classic", frozenset())
     assert missions == benchmark_missions(config, "classic", frozenset())  # the same for every run
@@ -78,7 +78,7 @@ def test_multi_target_benchmark_missions_name_the_named_target_and_absent_ones_e
     assert 0 < len(absent) < len(missions)
     for m in missions:
         scene = sample_scene(scene_config_for(m), m.scene.seed)
-        asked = parse_instruction(m.instruction or "")
+        asked = parse_instruction(m.instructions[0].instruction)
         held = [(t.kind, colour_name(t.bezel_colour)) for t in scene.targets]
         if m in absent:
             assert m.expect.outcome == "target_not_found"

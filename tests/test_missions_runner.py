@@ -40,6 +40,11 @@ def read_report(out: Path) -> dict:
     return json.loads((out / "report.json").read_text())
 
 
+def records(report: dict) -> list[dict]:
+    """The step records of the flight's one instruction."""
+    return report["instructions"][0]["records"]
+
+
 def test_a_centred_mission_passes_lands_and_writes_every_file(tmp_path: Path) -> None:
     vehicle = FakeVehicle.at_pose(east_m=-0.8, up_m=0.4)
     mission = parse_mission({"name": "fake-ok", "planner": "classic", "expect": {"max_steps": 12}})
@@ -50,9 +55,9 @@ def test_a_centred_mission_passes_lands_and_writes_every_file(tmp_path: Path) ->
     assert vehicle.calls[-3:] == ["stop_offboard", "land", "disarm"]
     report = read_report(tmp_path)
     assert report["status"] == "finished" and report["passed"] is True
-    assert len(report["steps"]) == result.steps + 1  # each decision, plus the final centred frame
-    assert report["steps"][0]["action"] == "right/down"
-    assert len(report["steps"][0]["pose"]) == 4
+    assert len(records(report)) == result.steps + 1  # each decision, plus the final centred frame
+    assert records(report)[0]["action"] == "right/down"
+    assert len(records(report)[0]["pose"]) == 4
     assert (tmp_path / "camera.gif").stat().st_size > 0
     assert (tmp_path / "trajectory.png").stat().st_size > 0
 
@@ -80,8 +85,8 @@ def test_expected_target_not_found_passes(tmp_path: Path) -> None:
     assert result.passed, result.failures
     assert result.moves == 0 and vehicle.moves_commanded == 0  # never flies without a detection
     report = read_report(tmp_path)
-    assert report["outcome"] == "target_not_found" and len(report["steps"]) == 3
-    assert [s["event"] for s in report["steps"]] == ["not_found"] * 3
+    assert report["outcome"] == "target_not_found" and len(records(report)) == 3
+    assert [s["event"] for s in records(report)] == ["not_found"] * 3
 
 
 def test_expected_target_lost_passes(tmp_path: Path) -> None:
@@ -92,7 +97,7 @@ def test_expected_target_lost_passes(tmp_path: Path) -> None:
     )
     result = fly_kit(kit_for(vehicle, FakePlanner([RIGHT]), detector), mission, tmp_path, LIMITS)
     assert result.passed, result.failures
-    assert read_report(tmp_path)["steps"][0]["detections"][0]["kind"] == "gauge"
+    assert records(read_report(tmp_path))[0]["detections"][0]["kind"] == "gauge"
 
 
 def test_report_survives_an_error_mid_flight(tmp_path: Path) -> None:
@@ -104,7 +109,7 @@ def test_report_survives_an_error_mid_flight(tmp_path: Path) -> None:
     assert "hold" in vehicle.calls and "land" in vehicle.calls  # flight_guard's safe stop
     report = read_report(tmp_path)
     assert report["status"] == "finished" and report["outcome"] == "aborted"
-    assert [s["move"]["commanded_m"]["right_m"] for s in report["steps"]] == [0.3, 0.3]
+    assert [s["move"]["commanded_m"]["right_m"] for s in records(report)] == [0.3, 0.3]
     assert "simulated link failure" in report["error"]
 
 
@@ -127,7 +132,7 @@ def test_ctrl_c_lands_and_keeps_the_steps(tmp_path: Path) -> None:
         fly_kit(kit, mission, tmp_path, LIMITS)
     assert "land" in vehicle.calls and not vehicle.in_air
     report = read_report(tmp_path)
-    assert report["outcome"] == "aborted" and len(report["steps"]) == 2
+    assert report["outcome"] == "aborted" and len(records(report)) == 2
     assert "interrupted" in report["error"]
 
 
@@ -150,7 +155,7 @@ def test_default_mission_in_process_ends_centred_per_truth(
     assert report["outcome"] == "centred" and report["passed"] is True
     du, dv = report["final_offset_px"]["truth"]
     assert max(abs(du), abs(dv)) <= report["epsilon_px"]
-    assert report["steps"][0]["distances"] is not None and len(report["steps"][0]["distances"]) == 9
+    assert records(report)[0]["distances"] is not None and len(records(report)[0]["distances"]) == 9
     out = capsys.readouterr().out
     assert "PASS  default: centred" in out and str(tmp_path / "report.json") in out
 

@@ -46,7 +46,7 @@ def test_a_recorded_mission_reads_back_with_every_step_on_simulated_time(tmp_pat
     result = run_mission(parse_mission(MISSION), tmp_path / "report", media=False, rerun_path=rrd)
     assert result.outcome == "centred" and result.steps >= 1
     report = json.loads((tmp_path / "report" / "report.json").read_text())
-    steps = report["steps"]
+    steps = report["instructions"][0]["records"]
     data = _columns(rrd)
 
     images = data["camera/image"]
@@ -116,7 +116,7 @@ def test_a_failing_recording_never_costs_the_flight(tmp_path: Path, monkeypatch:
     result = run_mission(parse_mission(MISSION), tmp_path / "report", media=False, rerun_path=rrd)
     assert result.outcome == "centred" and result.error is None
     report = json.loads((tmp_path / "report" / "report.json").read_text())
-    assert report["status"] == "finished" and len(report["steps"]) == result.steps + 1
+    assert report["status"] == "finished" and len(report["instructions"][0]["records"]) == result.steps + 1
 
 
 def test_benchmark_missions_record_each_mission_in_its_report_folder(tmp_path: Path) -> None:
@@ -128,5 +128,5 @@ def test_benchmark_missions_record_each_mission_in_its_report_folder(tmp_path: P
     folders = sorted((tmp_path / "b").iterdir())
     assert len(folders) == 2 and summary["planners"]["classic"]["missions"] == 2
     for folder in folders:
-        steps = json.loads((folder / "report.json").read_text())["steps"]
+        steps = json.loads((folder / "report.json").read_text())["instructions"][0]["records"]
         assert _columns(folder / MISSION_RRD)["camera/image"]["step"] == [s["index"] for s in steps]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from controller.missions.kits.simulated import SimTruth
+from controller.missions.truth import TrueTarget
 from sim_world.rendering.camera import CameraConfig
 from sim_world.rendering.mjpeg import MjpegServer
 from sim_world.rendering.video import frame_truth
@@ -37,7 +38,7 @@ def test_sim_truth_reads_every_target_over_http_and_tells_when_it_cannot() -> No
     image = np.zeros((8, 8, 3), np.uint8)
     with MjpegServer(port=18710) as server:
         probe = SimTruth(f"http://127.0.0.1:{server.port}/truth.json")
-        assert probe.targets_offsets() is None  # nothing published yet (503): no truth, no guess
+        assert probe.targets() is None  # nothing published yet (503): no truth, no guess
         server.publish(
             image,
             truth={
@@ -49,7 +50,11 @@ def test_sim_truth_reads_every_target_over_http_and_tells_when_it_cannot() -> No
                 ],
             },
         )
-        assert probe.targets_offsets() == [(3.0, -4.0), None, (-60.5, 7.25)]
+        assert probe.targets() == [
+            TrueTarget("gauge", None, (3.0, -4.0)),
+            TrueTarget("valve", None, None),
+            TrueTarget("switchbox", None, (-60.5, 7.25)),
+        ]
         assert probe.offset_px() == (3.0, -4.0)
         server.publish(image, truth={"target": {"offset_px": [1.0, 1.0], "in_view": True}})
-        assert probe.targets_offsets() is None  # an older simulator: the named target only
+        assert probe.targets() is None  # an older simulator: the named target only

@@ -40,9 +40,10 @@ from controller.benchmarks.hostile_mavlink import (
     random_datagrams,
     steering_messages,
 )
+from controller.missions.kits import open_kit
 from controller.missions.kits.base import FlightKit
 from controller.missions.report import claim_report_dir
-from controller.missions.runner import fly_kit, open_kit
+from controller.missions.runner import fly_kit
 from controller.missions.schema import Mission
 from flight.relay import MavlinkRelay
 from sim_world.vehicle.serve import SUMMARY_PREFIX

@@ -1,13 +1,17 @@
-"""The report folder of one mission: `report.json`, a trajectory plot, an annotated GIF (and a .tlog).
+"""The report folder of one flight: `report.json`, a trajectory plot, an annotated GIF (and a .tlog).
 
-`ReportWriter` is fed each step as the loop records it and rewrites `report.json`
-after every step (status `in_progress`), so a crash or Ctrl-C loses nothing that was
-recorded; `finish()` (called from a `finally`) writes the final JSON, the plot and
-the GIF. Nothing in the folder is needed to fly: it is for people and CI.
+A flight centres one or more instructions (`controller.missions.session`). `ReportWriter` is told when
+each instruction begins and ends and fed each step as the loop records it, and rewrites `report.json`
+after every step (status `in_progress`), so a crash or Ctrl-C loses nothing that was recorded;
+`finish()` (called from a `finally`) writes the final JSON, the plot and the GIF. Nothing in the folder
+is needed to fly: it is for people and CI.
 
 ```
-OUT/report.json       mission, outcome, judgement, steps, final offsets (truth, detector), timing
-OUT/trajectory.png    the drone's path in the wall plane, and |offset| per step
+OUT/report.json       the mission, the flight's outcome and judgement, timing, and `instructions`: per
+                      instruction its text, target, outcome, judgement, steps (counted as the budget
+                      counts them), final offsets (truth, detector), wrong target, its step records
+                      (`records`)
+OUT/trajectory.png    the drone's path in the wall plane (one colour per instruction), and |offset| per step
 OUT/camera.gif        each step's frame with bbox, ε box and the chosen action drawn on it
 OUT/flight.tlog       MAVLink telemetry log (MAVLink flights only; see runner)
 ```
@@ -166,7 +170,7 @@ def write_setup_failure(out_dir: Path, mission: Any, error: BaseException) -> No
         "outcome": Outcome.ERROR.value,
         "passed": False,
         "error": how,
-        "steps": [],
+        "instructions": [],
         "files": {"report": REPORT_JSON, "trajectory": None, "gif": None, "tlog": None},
     }
     try:
@@ -181,7 +185,8 @@ def write_setup_failure(out_dir: Path, mission: Any, error: BaseException) -> No
 
 @dataclass
 class ReportWriter:
-    """Writes one mission's report folder; `add_step` after each step, `finish` once at the end.
+    """Writes one flight's report folder: `begin_instruction` / `add_step` after each step /
+    `end_instruction` per instruction, `finish` once at the end.
 
     Recording never costs the flight: a write that fails (a full disk, a read-only or removed folder)
     is said once and stops the per-step rewrites; `finish` still tries the whole report, then one
@@ -196,7 +201,12 @@ class ReportWriter:
     epsilon_px: float
     media: bool = True
     """Write the plot and the GIF (benchmarks turn this off: the JSON is what they need)."""
+    instructions: list[dict[str, Any]] = field(default_factory=list)
+    """Each instruction's entry as report.json holds it, its step records (JSON) under "records"."""
     steps: list[StepRecord] = field(default_factory=list)
+    """Every step of the flight, in order (the GIF, the plot, the timing)."""
+    step_instruction: list[int] = field(default_factory=list)
+    """Each step's instruction (its index in `instructions`)."""
     recording_errors: list[str] = field(default_factory=list)
     """What could not be written, one line each (said once, also in the final report where it fits)."""
     reserve_bytes: int = RESERVE_BYTES
@@ -214,17 +224,32 @@ class ReportWriter:
     def json_path(self) -> Path:
         return self.out_dir / REPORT_JSON
 
+    def begin_instruction(self, entry: dict[str, Any]) -> None:
+        """A new instruction begins (`entry`: what it asks; its steps follow)."""
+        self.instructions.append({**entry, "status": "in_progress", "records": []})
+        self._rewrite()
+
     def add_step(self, step: StepRecord) -> None:
+        """A step of the current instruction (one is begun for a writer fed steps without one)."""
+        if not self.instructions:
+            self.begin_instruction({})
         self.steps.append(step)
+        self.step_instruction.append(len(self.instructions) - 1)
+        self.instructions[-1]["records"].append(step_to_json(step))
+        self._rewrite()
+
+    def end_instruction(self, summary: dict[str, Any]) -> None:
+        """The current instruction ended: its outcome and judgement (`summary`)."""
+        self.instructions[-1].update({**summary, "status": "finished"})
+        self._rewrite()
+
+    def _rewrite(self) -> None:
         if not self._steps_paused:
             self._steps_paused = not self._write({"status": "in_progress"})
 
     def _write(self, summary: dict[str, Any], with_steps: bool = True) -> bool:
-        data = {
-            **self.header,
-            **summary,
-            "steps": [step_to_json(s) for s in self.steps] if with_steps else [],
-        }
+        entries = self.instructions if with_steps else [{**e, "records": []} for e in self.instructions]
+        data = {**self.header, **summary, "instructions": entries}
         try:
             write_json_atomic(self.json_path, data, indent=1)
         except OSError as exc:
@@ -295,16 +320,21 @@ class ReportWriter:
         up = [-s.telemetry.position_ned.down_m for s in self.steps]
         fig = Figure(figsize=(9.0, 4.0))
         ax_path, ax_off = fig.subplots(1, 2)
-        ax_path.plot(east, up, "-o", color="tab:blue", markersize=4)
+        several = len(self.instructions) > 1
+        for number, entry in enumerate(self.instructions):
+            at = [i for i, owner in enumerate(self.step_instruction) if owner == number]
+            if at:
+                label = f"{number + 1}: {entry.get('instruction', '')}"[:40] if several else None
+                ax_path.plot([east[i] for i in at], [up[i] for i in at], "-o", markersize=4, label=label)
         ax_path.plot(east[0], up[0], "s", color="tab:green", label="start")
         ax_path.plot(east[-1], up[-1], "*", color="tab:red", markersize=12, label="end")
-        for s in self.steps:
+        for i, s in enumerate(self.steps):
             if s.event in (StepEvent.LOST, StepEvent.RECOVERY):
-                ax_path.annotate(s.event.value, (east[s.index], up[s.index]), fontsize=7)
+                ax_path.annotate(s.event.value, (east[i], up[i]), fontsize=7)
         ax_path.set(xlabel="east (m) = right", ylabel="up (m)", title="drone path in the wall plane")
         ax_path.set_aspect("equal", adjustable="datalim")
         ax_path.legend(fontsize=8)
-        index = [s.index for s in self.steps]
+        index = list(range(len(self.steps)))
         for label, values, style in (
             ("detector", [s.offset_px for s in self.steps], "-o"),
             ("truth", [s.truth_offset_px for s in self.steps], "--x"),

@@ -1,7 +1,11 @@
 """A mission as a Rerun recording (`dronectl fly --rerun FILE.rrd`): open it with `rerun FILE.rrd`.
 
-Optional (`pip install -e '.[rerun]'`). Per loop step, on two timelines, `sim_time` (the
-vehicle's clock: simulated seconds in a simulator) and `step`:
+Optional (`pip install -e '.[rerun]'`). Per loop step, on three timelines, `sim_time` (the
+vehicle's clock: simulated seconds in a simulator), `step` (counted over the whole flight) and
+`instruction` (1, 2, ...: which of the flight's instructions the step belongs to):
+
+- `instruction`: each instruction's text as it begins (a text log), so a flight of several
+  instructions shows which one every step served;
 
 - `camera/image`: the frame the loop decided on (JPEG); `camera/image/detection`: the
   detector's box, labelled with kind and confidence; `camera/image/epsilon`: the ε box around
@@ -73,12 +77,26 @@ class RerunRecorder:
         self.epsilon_px = epsilon_px
         self._track: list[list[float]] = []
         self._failed = False
+        self._steps = 0  # over the whole flight: each instruction's loop counts its own from 0
+        self._instruction = 0
         self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{header.get('mission', 'mission')}")
         self._stream = self.rec.binary_stream()
         self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        lines = [f"**{key}**: {header.get(key)}" for key in ("mission", "planner", "instruction", "vehicle")]
+        lines = [f"**{key}**: {header.get(key)}" for key in ("mission", "planner", "vehicle")]
+        lines += [
+            f"**instruction {i}**: {text}" for i, text in enumerate(header.get("instructions_planned", []), 1)
+        ]
         lines.append(f"**ε**: {epsilon_px:g} px")
         self.rec.log("mission", rr.TextDocument("\n\n".join(lines), media_type="text/markdown"), static=True)
+
+    def begin_instruction(self, index: int, text: str) -> None:
+        """Instruction `index` (1, 2, ...) of the flight begins: its text on the `instruction` timeline."""
+        if self._failed:
+            return
+        self._instruction = index
+        self.rec.set_time("instruction", sequence=index)
+        self.rec.set_time("step", sequence=self._steps)
+        self.rec.log("instruction", self._rr.TextLog(f"{index}: {text}", level="INFO"))
 
     def add_step(self, step: StepRecord) -> None:
         if self._failed:
@@ -91,7 +109,9 @@ class RerunRecorder:
 
     def _log_step(self, step: StepRecord) -> None:
         rr, rec = self._rr, self.rec
-        rec.set_time("step", sequence=step.index)
+        rec.set_time("step", sequence=self._steps)
+        rec.set_time("instruction", sequence=self._instruction)
+        self._steps += 1
         rec.set_time("sim_time", duration=float(step.vehicle_time_s))
         image = step.frame.image
         h, w = image.shape[:2]
@@ -120,7 +140,8 @@ class RerunRecorder:
             for action, distance in zip(ALL_ACTIONS, step.distances, strict=True):
                 rec.log(f"planner/distance/{action.name.replace('/', '_')}", rr.Scalars(float(distance)))
         if step.action is not None or step.event.value:
-            text = f"step {step.index}: {step.action.name if step.action else '-'} {step.event.value}".strip()
+            action = step.action.name if step.action else "-"
+            text = f"instruction {self._instruction} step {step.index}: {action} {step.event.value}".strip()
             rec.log("planner/action", rr.TextLog(text))
         if step.move_m is not None:
             rec.log("move/commanded/right_m", rr.Scalars(float(step.move_m[0])))

@@ -9,10 +9,11 @@ detector's final offset.
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from controller.missions.schema import Mission
+from controller.missions.schema import Expectations, Mission
 from controller.planning.loop_records import Outcome, StepEvent, StepRecord
 
 
@@ -53,6 +54,11 @@ class MissionResult:
     """What could not be written (a full disk, a read-only folder): the flight went on without it."""
     report_written: bool = True
     """Whether report.json holds the final state (False: only the console has the outcome)."""
+    instructions: tuple[dict[str, Any], ...] = ()
+    """Each instruction of the flight, in order (`InstructionResult.summary()`: its outcome, steps, moves,
+    final offsets, wrong target, judgement). The fields above are the flight's: `outcome` the first
+    instruction's that missed its expectation (else the last one's), `steps`/`moves` the sums, the final
+    offsets the last instruction's, `wrong_target` any instruction's."""
 
     @property
     def final_truth_error_px(self) -> float | None:
@@ -76,19 +82,20 @@ def wrong_target(
     epsilon_px: float,
     final_truth_offset_px: tuple[float, float] | None,
     targets_truth: list[tuple[float, float] | None] | None,
+    named: Collection[int] = (0,),
 ) -> int | None:
     """A wrong-target centring: the loop ended `centred`, the named target is not within ε per truth,
-    and another target is. Returns that target's index in the scene (the named one is 0), else None.
+    and another target is. Returns that target's index in the scene, else None.
 
-    `targets_truth`: every target's true offset at the end, the named one first (None: no such truth,
-    e.g. a kit other than the in-process sim); its first entry is not used (`final_truth_offset_px`
-    judges the named one, as for success)."""
+    `targets_truth`: every target's true offset at the end (None: no such truth, e.g. a real vehicle);
+    `named`: the indices of the targets the instruction names (the scene's named one, 0, by default),
+    which are not candidates (`final_truth_offset_px` judges the named one, as for success)."""
     if outcome is not Outcome.CENTRED or not targets_truth:
         return None
     if final_truth_offset_px is not None and _error_px(final_truth_offset_px) <= epsilon_px:
         return None
-    for index, offset in enumerate(targets_truth[1:], start=1):
-        if offset is not None and _error_px(offset) <= epsilon_px:
+    for index, offset in enumerate(targets_truth):
+        if index not in named and offset is not None and _error_px(offset) <= epsilon_px:
             return index
     return None
 
@@ -106,10 +113,12 @@ def judge(
     final_detector_offset_px: tuple[float, float] | None,
     has_truth: bool,
     wrong_target_index: int | None = None,
+    expect: Expectations | None = None,
 ) -> list[str]:
-    """Every expectation of `mission` that the flight broke, in words; empty when it passed.
-    `wrong_target_index`: see `wrong_target` (a wrong-target centring never passes)."""
-    expect = mission.expect
+    """Every expectation that the flight broke, in words; empty when it passed. `expect`: an
+    instruction's own expectations (None: the mission's). `wrong_target_index`: see `wrong_target` (a
+    wrong-target centring never passes)."""
+    expect = expect or mission.expect
     failures: list[str] = []
     if wrong_target_index is not None:
         failures.append(
@@ -131,3 +140,66 @@ def judge(
         shown = "none" if error_px is None else f"{error_px:.1f} px"
         failures.append(f"final offset {shown} per {source} > {expect.final_offset_px:g} px")
     return failures
+
+
+@dataclass(frozen=True)
+class InstructionResult:
+    """One instruction of a flight (`controller.missions.session`): what it asked, how its centring loop
+    ended, and how it was judged against its expectations."""
+
+    index: int
+    """1, 2, ...: its place in the flight."""
+    instruction: str
+    target: dict[str, str | None]
+    """What the loop centred: {"kind", "attribute"} as the instruction was understood (None: not named)."""
+    outcome: Outcome
+    message: str
+    passed: bool
+    failures: tuple[str, ...]
+    steps: int
+    """Steps as the budget counts them (`count_steps`)."""
+    moves: int
+    refinement_moves: int
+    second_choice_moves: int
+    final_truth_offset_px: tuple[float, float] | None
+    final_detector_offset_px: tuple[float, float] | None
+    wrong_target_index: int | None
+    """Per truth, another target (its index in the scene) within ε where the loop stopped (`wrong_target`)."""
+    targets_truth_final_px: list[tuple[float, float] | None] | None
+    """Every target's true offset when the loop ended (the scene's named target first); None: no truth."""
+    vehicle_s: float
+    wall_s: float
+    error: str | None = None
+    records: tuple[StepRecord, ...] = field(default=(), repr=False, compare=False)
+    """The loop's step records (frames included): for a caller's own use; not in `summary()`."""
+
+    @property
+    def wrong_target(self) -> bool:
+        return self.wrong_target_index is not None
+
+    @property
+    def final_truth_error_px(self) -> float | None:
+        off = self.final_truth_offset_px
+        return None if off is None else _error_px(off)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able, without the step records: what report.json and `MissionResult.instructions` hold."""
+        data = {f: getattr(self, f) for f in self.__dataclass_fields__ if f != "records"}
+        data["outcome"] = self.outcome.value
+        data["wrong_target"] = self.wrong_target
+        data["final_truth_error_px"] = self.final_truth_error_px
+        data["final_offset_px"] = {
+            "truth": self.final_truth_offset_px,
+            "detector": self.final_detector_offset_px,
+        }
+        data["failures"] = list(self.failures)
+        return data
+
+
+def flight_outcome(results: list[InstructionResult], expected: list[Outcome]) -> Outcome:
+    """A flight's outcome: the first instruction's that missed its expected outcome, else the last one's
+    (ABORTED for a flight that flew none)."""
+    for result, wanted in zip(results, expected, strict=True):
+        if result.outcome is not wanted:
+            return result.outcome
+    return results[-1].outcome if results else Outcome.ABORTED

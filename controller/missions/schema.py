@@ -16,7 +16,10 @@ twins: false                     # one other target of the named kind, in anothe
 target_attribute: null           # the named target's trim colour: black | grey | red | blue | yellow | null
 start: {right_m: -0.5, up_m: -0.4, distance_m: 2.0, yaw_deg: 0}   # drone pose relative to the centred pose
 # start: {random: {seed: 7, view_fraction: [0.2, 0.8], distance_m: [1.6, 2.6], yaw_deg: [-8, 8]}}
-instruction: center the gauge     # null: "center the <kind>", "center the <colour> <kind>" with twins
+instructions:                    # centred in order in ONE flight (take off once, land once); [] (the
+  - centre the gauge             # default): one resolved from the scene, "center the <kind>" (with its
+  - {instruction: the red valve, expect: {outcome: centred, max_steps: 8}}   # colour where needed)
+# instruction: center the gauge  # one instruction: the same as a one-element `instructions` list
 vehicle: sim                     # sim | sim-mavlink | px4-sitl | ardupilot-sitl | a MAVLink URL (udpin://...)
 autopilot: auto                  # a URL's autopilot: auto (its HEARTBEAT) | px4 (MAVSDK) | ardupilot
 camera: sim                      # sim | a stream URL (http://host:8080/stream.mjpg, rtsp://...)
@@ -34,6 +37,14 @@ sim_speed: 1.0                   # vehicle: sim-mavlink only: simulated s per wa
 px4: {instance: auto, speed: 1.0}  # vehicle: px4-sitl only (the PX4 folder: --px4 or $PX4_SITL_DIR)
 ardupilot: {instance: auto, speed: 1.0}  # vehicle: ardupilot-sitl only (--ardupilot, $ARDUPILOT_SITL_DIR)
 ```
+
+`instructions`: each entry is flown by its own run of the centring loop (its own step budget,
+`max_steps`, and `timeout_s`) from where the previous one left the drone, holding in between; a plain
+string is judged by the mission's `expect`, a mapping may give its own `expect` (replacing the
+mission's for that instruction). The mission passes when every instruction meets its expectation.
+An instruction that names a target the scene lacks, or one out of view, ends `target_not_found`
+and the flight goes on to the next. The scene's named target (`target_kind`, `target_attribute`,
+`twins`) is the one the first instruction names; the other targets are the scene's others.
 
 `start` is the drone's pose relative to the pose that centres the target (in front
 of it, looking at the wall): `right_m` > 0 puts the drone to the right of that pose, so
@@ -268,8 +279,16 @@ class Expectations(StrictModel):
     """The final truth offset, max(|du|, |dv|), must not exceed this."""
 
 
+class MissionInstruction(StrictModel):
+    """One instruction of a mission's flight, and what must hold when its centring loop ends."""
+
+    instruction: str = Field(min_length=1)
+    expect: Expectations | None = None
+    """None: the mission's `expect`."""
+
+
 class Mission(StrictModel):
-    """One centring mission."""
+    """One centring mission: one flight, one or more instructions."""
 
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
     tags: tuple[str, ...] = ()
@@ -291,9 +310,10 @@ class Mission(StrictModel):
     """The named target's trim colour (a colour name of `drone_inspect_core.vocabulary`);
     None: drawn."""
     start: Start = StartPose()
-    instruction: str | None = None
-    """None: resolved from the built scene, "center the <kind>" ("center the <colour> <kind>" when the
-    colour tells the named target apart: twins, or a `target_attribute`)."""
+    instructions: tuple[MissionInstruction, ...] = ()
+    """What to centre, in order, in one flight (the module docstring). Empty: one instruction resolved
+    from the built scene, "center the <kind>" ("center the <colour> <kind>" when the colour tells the
+    named target apart: twins, or a `target_attribute`). A file's `instruction: TEXT` is `[TEXT]`."""
     vehicle: str = SIM
     camera: str = SIM
     planner: PlannerName = "latent"
@@ -320,6 +340,29 @@ class Mission(StrictModel):
     ardupilot: ArduPilotSpec = ArduPilotSpec()
     autopilot: AutopilotName = "auto"
     faults: FaultSpec = FaultSpec()
+
+    @model_validator(mode="before")
+    @classmethod
+    def _one_instruction(cls, data: object) -> object:
+        """`instruction: TEXT` is `instructions: [TEXT]` (`instruction: null`: none given); both at once
+        only where `instruction` is null (the command line's `--instruction` over a file's)."""
+        if not isinstance(data, dict) or "instruction" not in data:
+            return data
+        data = dict(data)
+        one = data.pop("instruction")
+        if one is not None and data.get("instructions"):
+            raise ValueError("instruction: give `instruction` (one) or `instructions` (a list), not both")
+        if one is not None:
+            data["instructions"] = [one]
+        return data
+
+    @field_validator("instructions", mode="before")
+    @classmethod
+    def _plain_instructions(cls, value: object) -> object:
+        """A plain string entry is `{instruction: TEXT}` (judged by the mission's `expect`)."""
+        if isinstance(value, list | tuple):
+            return [{"instruction": v} if isinstance(v, str) else v for v in value]
+        return value
 
     @field_validator("sim_speed", mode="before")
     @classmethod
@@ -377,31 +420,39 @@ class Mission(StrictModel):
                 vocabulary.kind(self.target_kind)
             except VocabularyError as exc:
                 raise ValueError(f"target_kind: {exc}") from None
-        if self.instruction is not None and not isinstance(self.scene.config, str):  # (a scene file's
-            try:  # own kinds join when its scene is built; the runner checks again with them then)
-                understand(self.instruction, vocabulary)
-            except InstructionRefused as exc:
-                raise ValueError(f"instruction: {exc}") from None
+        if not isinstance(self.scene.config, str):  # (a scene file's own kinds join when its scene is
+            for field, text in self._instruction_fields():  # built; the session checks again then)
+                try:
+                    understand(text, vocabulary)
+                except InstructionRefused as exc:
+                    raise ValueError(f"{field}: {exc}") from None
         return self
+
+    def _instruction_fields(self) -> list[tuple[str, str]]:
+        """(the field as errors name it, the text) of each instruction."""
+        if len(self.instructions) == 1:
+            return [("instruction", self.instructions[0].instruction)]
+        return [(f"instructions[{i}]", entry.instruction) for i, entry in enumerate(self.instructions)]
 
     @model_validator(mode="after")
     def _named_target(self) -> Mission:
-        """Twins need a second target, and an instruction that tells the twins apart by colour."""
+        """Twins need a second target, and the first instruction (the named target's) must tell the twins
+        apart by colour."""
         if self.twins and self.targets < 2:
             raise ValueError(
                 f"twins: needs targets >= 2 (the named one and its twin), got targets {self.targets}"
             )
-        if self.instruction is not None and (self.twins or self.target_attribute is not None):
-            named = parse_instruction(self.instruction, self.vocabulary).attribute
+        if self.instructions and (self.twins or self.target_attribute is not None):
+            field, text = self._instruction_fields()[0]
+            named = parse_instruction(text, self.vocabulary).attribute
             if named is None and self.twins:
                 raise ValueError(
-                    f"instruction: {self.instruction!r} names no colour, but the scene has twins "
+                    f"{field}: {text!r} names no colour, but the scene has twins "
                     "(two targets of one kind): say which, e.g. 'center the red gauge'"
                 )
             if self.target_attribute is not None and named not in (None, self.target_attribute):
                 raise ValueError(
-                    f"instruction: {self.instruction!r} names {named}, but target_attribute is "
-                    f"{self.target_attribute}"
+                    f"{field}: {text!r} names {named}, but target_attribute is {self.target_attribute}"
                 )
         return self
 
@@ -489,10 +540,9 @@ class Mission(StrictModel):
     def instruction_text(
         self, target_kind: str | None, attribute: str | None = None, kind_repeats: bool = False
     ) -> str:
-        """The instruction, or one resolved from the built scene's named target: its kind, and its trim
-        colour `attribute` where `names_colour` or another target has the same kind (`kind_repeats`)."""
-        if self.instruction:
-            return self.instruction
+        """The instruction resolved from the built scene's named target (for a mission that gives none): its
+        kind, and its trim colour `attribute` where `names_colour` or another target has the same kind
+        (`kind_repeats`)."""
         colour = f"{attribute} " if attribute and (self.names_colour or kind_repeats) else ""
         return f"center the {colour}{target_kind or 'target'}"
 

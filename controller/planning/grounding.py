@@ -28,9 +28,20 @@ import functools
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 from drone_inspect_core.vocabulary import Vocabulary, normalise_phrase, shipped_vocabulary
 from perception.types import Detection
+
+
+class KindAndColour(Protocol):
+    """Anything with a kind and a trim colour name: a detection, or a simulator's truth of a target."""
+
+    @property
+    def kind(self) -> str | None: ...
+
+    @property
+    def attribute(self) -> str | None: ...
 
 
 @dataclass(frozen=True)
@@ -49,11 +60,12 @@ class TargetQuery:
             return "any target"
         return " ".join(p for p in (self.attribute, self.kind or "target") if p)
 
-    def matches(self, detection: Detection) -> bool:
-        """Whether `detection` is of the asked kind and colour (an unnamed one matches anything)."""
-        if self.kind is not None and detection.kind != self.kind:
+    def matches(self, seen: KindAndColour) -> bool:
+        """Whether `seen` (a detection, a target's truth) is of the asked kind and colour (an unnamed one
+        matches anything)."""
+        if self.kind is not None and seen.kind != self.kind:
             return False
-        return self.attribute is None or detection.attribute == self.attribute
+        return self.attribute is None or seen.attribute == self.attribute
 
 
 def _phrase_pattern(table: dict[str, tuple[str, ...]]) -> tuple[re.Pattern[str], dict[str, str]]:

@@ -34,6 +34,7 @@ class Outcome(str, Enum):
     TARGET_NOT_FOUND = "target_not_found"  # the named target was never seen in this run
     PLANNER_STALLED = "planner_stalled"
     ABORTED = "aborted"  # an exception or Ctrl-C ended the flight (set by the caller)
+    STOPPED = "stopped"  # the operator stopped it (Hold, Land, Kill) and the vehicle held (set by the caller)
     ERROR = "error"  # the mission could not start (set by the caller)
 
     def __str__(self) -> str:

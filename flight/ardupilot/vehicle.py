@@ -341,6 +341,15 @@ class ArduPilotVehicle(Vehicle):
             lambda t: not t.armed, timeout_s or self.config.timeouts.disarm_s, "disarm()", "disarmed state"
         )
 
+    def kill(self, timeout_s: float | None = None) -> None:
+        """ARM_DISARM forced (21196): ArduCopter stops its motors in the air too."""
+        ack = self._command(M.MAV_CMD_COMPONENT_ARM_DISARM, (0.0, FORCE_DISARM), "kill()")
+        if not ack.accepted:
+            raise CommandDeniedError("kill()", ack.name, self.state.last_text())
+        self._wait(
+            lambda t: not t.armed, timeout_s or self.config.timeouts.disarm_s, "kill()", "disarmed state"
+        )
+
     def _set_mode(self, name: str, origin: str, timeout_s: float | None = None) -> None:
         """DO_SET_MODE to an ArduCopter mode, acknowledged, then confirmed from the heartbeat."""
         number = COPTER_MODES[name]

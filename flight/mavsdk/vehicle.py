@@ -395,6 +395,18 @@ class MavsdkVehicle(Vehicle):
             lambda t: not t.armed, timeout_s or self.config.timeouts.disarm_s, "disarm()", "disarmed state"
         )
 
+    def kill(self, timeout_s: float | None = None) -> None:
+        """MAVSDK's kill: ARM_DISARM forced (21196), which PX4 obeys in the air too."""
+        action = self._require(self._action, "kill()")
+        self._in_offboard = False
+        try:
+            resend_on_timeout(action.kill, self._cache.link)
+        except ActionError as exc:
+            raise CommandDeniedError("kill()", exc.result.name, self._last_text()) from None
+        self._wait(
+            lambda t: not t.armed, timeout_s or self.config.timeouts.disarm_s, "kill()", "disarmed state"
+        )
+
     def _confirm_mode(self, mode: FlightMode, timeout_s: float | None, origin: str) -> None:
         timeout_s = timeout_s or self.config.timeouts.mode_change_s
         deadline = Deadline(self, timeout_s)

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from controller.missions.schema import Mission
+from controller.missions.truth import TargetsTruth, TruthFollower
 from controller.planning.grounding import TargetQuery
 from controller.planning.loop_records import TruthProbe
 from controller.planning.planners import Planner, make_planner
@@ -72,27 +73,39 @@ class FlightKit:
     epsilon_px: float | None = None
     """ε when the kit fixes it (tests); None: the mission's, else `default_epsilon_px(image_width_px)`."""
     target: TargetQuery | None = None
-    """The loop's target (`CentringConfig.target`); None: the instruction's own parse (real vehicles)."""
-    targets_truth: Callable[[], list[tuple[float, float] | None] | None] | None = None
-    """Judging only: every target's true offset in pixels now (None: out of view), the named one first;
-    None where the kit cannot tell (a real vehicle). The simulators (in-process, sim-vehicle, the PX4
-    bridge) can: wrong-target judging."""
+    """What `instruction` names, where the kit knows it from the scene (the named target's kind and
+    colour); None: the instruction's own reading (a real vehicle; a kit built in a test)."""
+    targets_truth: TargetsTruth | None = None
+    """Judging only: every target's truth now (`controller.missions.truth.TrueTarget`: kind, colour,
+    offset), the named one first; None where the kit cannot tell (a real vehicle). The simulators
+    (in-process, sim-vehicle, the PX4 and ArduPilot bridges) can: wrong-target judging."""
+    aim_truth: Callable[[TargetQuery | None], None] | None = None
+    """Judging only: point `truth_probe` at the target an instruction names (`TruthFollower.follow`);
+    None where the kit has no per-target truth (`truth_probe` is then the named target's)."""
+
+    @classmethod
+    def judged_by(cls, follower: TruthFollower, **fields: Any) -> FlightKit:
+        """A kit whose truth follows each instruction's target: `truth_probe`, `targets_truth` and
+        `aim_truth` from `follower`."""
+        return cls(
+            truth_probe=follower.offset_px,
+            targets_truth=follower.targets,
+            aim_truth=follower.follow,
+            **fields,
+        )
 
 
-def named_target(mission: Mission, targets: list[tuple[str, str]]) -> tuple[str, TargetQuery | None]:
-    """The instruction and the loop's target for a simulated scene whose targets are `targets`
-    ((kind, trim colour name), the named one first).
+def named_target(mission: Mission, targets: list[tuple[str, str]]) -> tuple[str, TargetQuery]:
+    """The instruction resolved from a simulated scene whose targets are `targets` ((kind, trim colour
+    name), the named one first), for a mission that gives none, and the loop's target for it.
 
-    A mission that gives its instruction keeps it, and the loop reads its target from the words (as
-    on a real vehicle: a mission naming a kind the scene lacks ends `target_not_found`). Otherwise
-    the instruction is resolved from the scene (the colour included where the kind alone would not
-    say which), and the loop's target is the named target's kind and that colour, from the scene
-    itself rather than through the lexicon."""
+    The colour is included where the kind alone would not say which, and the loop's target is the
+    named target's kind and that colour, from the scene itself rather than through the lexicon. A
+    mission's own instructions are read from their words (as on a real vehicle: one naming a kind the
+    scene lacks ends `target_not_found`)."""
     kind, attribute = targets[0]
     repeats = any(other_kind == kind for other_kind, _ in targets[1:])
     text = mission.instruction_text(kind, attribute, kind_repeats=repeats)
-    if mission.instruction:
-        return text, None
     return text, TargetQuery(kind, attribute if (mission.names_colour or repeats) else None)
 
 

@@ -25,6 +25,7 @@ from controller.missions.kits.base import (
 )
 from controller.missions.schema import Mission
 from controller.missions.setup import scene_config_for, start_offset_for, wind_config_for
+from controller.missions.truth import TrueTarget, TruthFollower
 from drone_inspect_core.world_options import StartPose
 from flight.pybullet_backend import PyBulletVehicle
 from flight.safe_vehicle import SafeVehicle
@@ -75,9 +76,13 @@ class SimWorld:
     def truth_offset(self) -> tuple[float, float] | None:
         return truth_offset(self.world)
 
-    def targets_truth(self) -> list[tuple[float, float] | None]:
-        """Judging only: every target's true offset (None: out of view), the named one first."""
-        return [t.offset_px if t.in_view else None for t in self.world.targets_truth()]
+    def targets_truth(self) -> list[TrueTarget]:
+        """Judging only: every target's kind, colour and true offset (None: out of view), the named one
+        first."""
+        return [
+            TrueTarget(target.kind, target.attribute, truth.offset_px if truth.in_view else None)
+            for target, truth in zip(self.world.scene.targets, self.world.targets_truth(), strict=True)
+        ]
 
 
 @contextmanager
@@ -106,7 +111,8 @@ def open_sim_kit(
     # seg: the truth detector needs occlusion truth
     with open_sim_world(mission, limits, with_seg=mission.detector == "truth") as sim:
         world = sim.world
-        planner = planner_for(mission, models, sim.truth_offset)
+        truth = TruthFollower(sim.targets_truth)  # judging only: the current instruction's target
+        planner = planner_for(mission, models, truth.offset_px)
         targets = [(t.kind, t.attribute) for t in world.scene.targets]
         instruction, target = named_target(mission, targets)
         info: dict[str, Any] = {
@@ -117,15 +123,14 @@ def open_sim_kit(
         }
         if len(targets) > 1 or mission.names_colour:
             info["targets"] = [{"kind": kind, "attribute": attribute} for kind, attribute in targets]
-        yield FlightKit(
+        yield FlightKit.judged_by(
+            truth,
             vehicle=sim.vehicle,
             camera=sim.camera,
             detector=sim_detector(mission, world, sim.camera, models),
             planner=planner,
             instruction=instruction,
             target=target,
-            truth_probe=sim.truth_offset,
-            targets_truth=sim.targets_truth,
             place_at_start=sim.place_at_start,
             info=info,
             image_width_px=world.config.camera.width,

@@ -24,6 +24,7 @@ from controller.missions.kits.base import (
 )
 from controller.missions.schema import Mission
 from controller.missions.setup import scene_config_for, wind_config_for
+from controller.missions.truth import TrueTarget, TruthFollower
 from drone_inspect_core.vehicle_limits import VehicleLimits
 from drone_inspect_core.vocabulary import colour_name
 from drone_inspect_core.world_options import StartPose
@@ -62,14 +63,19 @@ class SimTruth:
             return None
         return (float(target["offset_px"][0]), float(target["offset_px"][1])) if target["in_view"] else None
 
-    def targets_offsets(self) -> list[tuple[float, float] | None] | None:
-        """Every target's true offset (None: out of view), the named one first; None if unreachable or
-        the simulator publishes only the named target (an older sim-vehicle)."""
+    def targets(self) -> list[TrueTarget] | None:
+        """Every target's kind, colour and true offset (None: out of view), the named one first; None if
+        unreachable or the simulator publishes only the named target (an older sim-vehicle)."""
         try:
-            targets = _get_json(self.url)["truth"]["targets"]
-            return [(float(t["offset_px"][0]), float(t["offset_px"][1])) if t["in_view"] else None
-                    for t in targets]  # fmt: skip
-        except (OSError, ValueError, KeyError, TypeError, IndexError) as exc:
+            return [
+                TrueTarget(
+                    t.get("kind"),
+                    t.get("attribute"),
+                    (float(t["offset_px"][0]), float(t["offset_px"][1])) if t["in_view"] else None,
+                )
+                for t in _get_json(self.url)["truth"]["targets"]
+            ]
+        except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
             log.warning("no truth of every target from %s: %s", self.url, exc)
             return None
 
@@ -159,17 +165,16 @@ def simulated_mavlink_kit(mission: Mission, models: LoadedModels | None, sim: Si
     instruction, query = named_target(
         mission, [(t.kind, colour_name(t.bezel_colour)) for t in sampled.targets]
     )
-    truth = sim.truth
-    return FlightKit(
+    truth = TruthFollower(sim.truth.targets)  # judging only: the current instruction's target
+    return FlightKit.judged_by(
+        truth,
         vehicle=sim.opened.vehicle,
         camera=sim.opened.camera,
         detector=image_detector_for(mission, models),
         planner=planner_for(mission, models, truth.offset_px),
         instruction=instruction,
         target=query,
-        truth_probe=truth.offset_px,
-        truth_extremes=truth.extremes,
-        targets_truth=truth.targets_offsets,
+        truth_extremes=sim.truth.extremes,
         takeoff_altitude_m=sim.takeoff_climb_m(),
         info={
             "scene_seed": mission.scene.seed,
