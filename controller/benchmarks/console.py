@@ -50,6 +50,9 @@ class ConsoleBenchResult:
     page_fps: float
     latency_ms: dict[str, float]
     hold_s: list[float] = field(default_factory=list)
+    """Per Hold: the click (page clock) to the first telemetry sample in HOLD mode, seconds."""
+    hold_to_thread_s: list[float] = field(default_factory=list)
+    """Per Hold: the click to its command thread starting (page, WebSocket, server), seconds."""
     hold_summary: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
 
@@ -125,9 +128,10 @@ def run_console_bench(settings: ConsoleBenchSettings) -> ConsoleBenchResult:
                 continue
             page.click("#btn-hold")
             seen = _hold_seen(session, 10.0)
-            pressed = pilot.command_log[-1].get("pressed_s")
-            if pressed is not None:
-                result.hold_s.append(round(seen - pressed, 4))
+            record = pilot.command_log[-1]
+            if record.get("pressed_s") is not None:
+                result.hold_s.append(round(seen - record["pressed_s"], 4))
+                result.hold_to_thread_s.append(round(record["started_s"] - record["pressed_s"], 4))
             _until("the loop stopped", lambda: session.phase.value == "holding", 30)
         result.hold_summary = _quantiles(result.hold_s)
         return result

@@ -152,7 +152,9 @@ class Pilot:
         self._video = "ok"
         self._commands = ThreadPoolExecutor(max_workers=3, thread_name_prefix="console-command")
         self.command_log: list[dict[str, Any]] = []
-        """Every Hold / Land / Kill: its name, when the page pressed it and when it was sent (Unix s)."""
+        """Every Hold / Land / Kill: its name and, in Unix seconds, when the page's button was pressed
+        (`pressed_s`, the page's clock), when its thread began (`started_s`) and when the session's call
+        returned (`done_s`)."""
         self._threads = [
             threading.Thread(target=self._monitor, name="console-monitor", daemon=True),
             threading.Thread(target=self._watch, name="console-watcher", daemon=True),
@@ -272,19 +274,19 @@ class Pilot:
 
     # --- the command path ---------------------------------------------------------------------
     def _run_command(self, name: str, record: dict[str, Any]) -> None:
-        record["sent_s"] = time.time()
+        record["started_s"] = time.time()
         self.command_log.append(record)
         action = {"hold": self.session.hold, "land": self.session.land, "kill": self.session.kill}[name]
-        self._say(f"{name.capitalize()} sent", "info")
-        started = time.perf_counter()
         try:
             action()
         except Exception as exc:
             log.error("console: %s failed: %s", name, exc)
             self._say(f"{name.capitalize()} failed: {exc}", "error")
             return
+        finally:
+            record["done_s"] = time.time()
         done = {"hold": "the vehicle holds", "land": "landed", "kill": "motors stopped"}[name]
-        self._say(f"{name.capitalize()}: {done} ({time.perf_counter() - started:.2f} s)", "info")
+        self._say(f"{name.capitalize()}: {done} ({record['done_s'] - record['started_s']:.2f} s)", "info")
 
     # --- monitor and watcher ------------------------------------------------------------------
     def _flying(self) -> bool:

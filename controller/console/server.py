@@ -92,7 +92,8 @@ class Operator(Protocol):
         ...
 
     def command(self, name: str, sent_ms: float | None) -> str | None:
-        """Take off, Hold, Land or Kill; None when sent, else why not."""
+        """Take off, Hold, Land or Kill, handed to a thread of the operator's (it must not block); None
+        when sent, else why not."""
         ...
 
     def commander_left(self) -> None:
@@ -246,7 +247,7 @@ async def _handle(text: str, page_id: int, hub: Hub, operator: Operator) -> str 
         return await asyncio.to_thread(operator.instruct, message.text)
     if message.name == "kill" and not message.confirm:
         return "Kill stops the motors in the air: confirm it"
-    return await asyncio.to_thread(operator.command, message.name, message.sent_ms)
+    return operator.command(message.name, message.sent_ms)  # it only hands the command to its own thread
 
 
 class ConsoleServer:

@@ -61,6 +61,9 @@ def main(argv: list[str]) -> int:
     if hold:
         print(f"  Hold button to HOLD mode: p50 {hold['p50']:.3f} s, p95 {hold['p95']:.3f} s, "
               f"max {hold['max']:.3f} s (n {hold['n']})")  # fmt: skip
+    if result.hold_to_thread_s:
+        part = sorted(result.hold_to_thread_s)[len(result.hold_to_thread_s) // 2]
+        print(f"    of which click to the command thread (page, WebSocket, server): p50 {part:.3f} s")
     for note in result.notes:
         print(f"  note: {note}")
     write_result(args.json, result.as_dict())
