@@ -74,7 +74,7 @@ def test_the_console_in_a_browser(tmp_path: Path) -> None:
         for text, said in (
             ("", "the instruction is empty"),
             ("centre the flux capacitor", "no known target is called 'flux capacitor'"),
-            ("centre the gauge", "not flying: press Take off first"),
+            ("centre the gauge", "the vehicle is on ground: press Take off first"),
         ):
             page.fill("#instruction", text)
             page.press("#instruction", "Enter")

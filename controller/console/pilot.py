@@ -31,6 +31,7 @@ from typing import Any, Protocol
 
 from controller.console.hub import Hub
 from controller.console.views import ACTION_NAMES, detections_view, step_view, telemetry_view
+from controller.missions.session import Phase
 from controller.planning.grounding import InstructionRefused, TargetQuery, understand
 from controller.planning.loop_records import StepRecord
 from drone_inspect_core.vocabulary import Vocabulary
@@ -48,6 +49,8 @@ WATCH_PERIOD_S = 0.25
 VIDEO_LOST_S = 1.0
 """No frame for this long: the video is lost (the page says so, a running operation holds)."""
 JOIN_TIMEOUT_S = 10.0
+GROUNDED = (Phase.ON_GROUND, Phase.LANDED, Phase.KILLED)
+"""The session's phases in which Hold and Land have nothing to do."""
 
 
 class Session(Protocol):
@@ -63,6 +66,9 @@ class Session(Protocol):
 
     @property
     def epsilon_px(self) -> float: ...
+
+    @property
+    def phase(self) -> Phase: ...
 
     def telemetry(self) -> Telemetry | None: ...
 
@@ -147,9 +153,9 @@ class Pilot:
         self._closing = threading.Event()
         self._seen: tuple[Detection, ...] = ()
         self._frame_size: tuple[int, int] | None = None
-        self._telemetry: Telemetry | None = None
         self._link = "ok"
         self._video = "ok"
+        self._phase = session.phase
         self._commands = ThreadPoolExecutor(max_workers=3, thread_name_prefix="console-command")
         self.command_log: list[dict[str, Any]] = []
         """Every Hold / Land / Kill: its name and, in Unix seconds, when the page's button was pressed
@@ -189,7 +195,7 @@ class Pilot:
         if refused is not None:
             return refused
         if not self._flying():
-            return "the vehicle is not flying: press Take off first"
+            return f"the vehicle is {self.session.phase.value.replace('_', ' ')}: press Take off first"
         return self._start("centring", text, lambda: self._centre(text, query))
 
     def command(self, name: str, sent_ms: float | None = None) -> str | None:
@@ -201,6 +207,8 @@ class Pilot:
             return self._start("taking off", None, self._take_off)
         if name not in ("hold", "land", "kill"):
             return f"unknown command {name!r}"
+        if name in ("hold", "land") and self.session.phase in GROUNDED:
+            return f"{name.capitalize()}: the vehicle is {self.session.phase.value.replace('_', ' ')}"
         record = {"name": name, "pressed_s": None if sent_ms is None else sent_ms / 1000.0}
         self._commands.submit(self._run_command, name, record)
         return None
@@ -290,8 +298,7 @@ class Pilot:
 
     # --- monitor and watcher ------------------------------------------------------------------
     def _flying(self) -> bool:
-        telemetry = self._telemetry
-        return telemetry is not None and telemetry.armed and telemetry.in_air
+        return self.session.phase not in GROUNDED
 
     def _monitor(self) -> None:
         while not self._closing.wait(TELEMETRY_PERIOD_S):
@@ -305,10 +312,11 @@ class Pilot:
             except Exception as exc:  # the page must keep its monitor whatever the vehicle does
                 log.debug("console monitor: telemetry failed: %s", exc)
                 telemetry, link = None, "lost"
-            self._telemetry = telemetry
             video = "lost" if self.tap.failure is not None or self.tap.silent_s() > VIDEO_LOST_S else "ok"
             self.hub.publish(telemetry_view(telemetry, setpoint_age_s(self.session.vehicle), link), keep=True)
-            changed = (link, video) != (self._link, self._video)
+            phase = self.session.phase
+            changed = (link, video, phase) != (self._link, self._video, self._phase)
+            self._phase = phase
             lost = [what for what, now, before in (("link", link, self._link), ("video", video, self._video))
                     if now == "lost" and before == "ok"]  # fmt: skip
             self._link, self._video = link, video
@@ -363,6 +371,7 @@ class Pilot:
                 "activity": activity,
                 "instruction": instruction,
                 "flying": self._flying(),
+                "phase": self.session.phase.value,
                 "video": self._video,
                 "link": self._link,
             },
