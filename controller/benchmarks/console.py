@@ -54,6 +54,8 @@ class ConsoleBenchResult:
     """Per Hold: the click (page clock) to the first telemetry sample in HOLD mode, seconds."""
     hold_to_thread_s: list[float] = field(default_factory=list)
     """Per Hold: the click to its command thread starting (page, WebSocket, server), seconds."""
+    hold_call_s: list[float] = field(default_factory=list)
+    """Per Hold: the session's `hold()` call, from its start to its return (HOLD confirmed), seconds."""
     hold_summary: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
 
@@ -130,6 +132,7 @@ def run_console_bench(settings: ConsoleBenchSettings) -> ConsoleBenchResult:
             if record.get("pressed_s") is not None:
                 result.hold_s.append(round(seen - record["pressed_s"], 4))
                 result.hold_to_thread_s.append(round(record["started_s"] - record["pressed_s"], 4))
+                result.hold_call_s.append(round(record.get("done_s", seen) - record["started_s"], 4))
             _until("the loop stopped", lambda: session.phase.value == "holding", 30)
         result.hold_summary = _quantiles(result.hold_s)
         return result

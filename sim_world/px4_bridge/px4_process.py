@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from sim_world.sitl.children import find_sitl_dir, set_parent_death_signal
+from sim_world.vehicle.telemetry import HEARTBEAT_HZ
 
 log = logging.getLogger(__name__)
 
@@ -306,10 +307,6 @@ def _simulator_script(ports: Px4Ports) -> str:
     return "\n".join(lines) + "\n"
 
 
-HEARTBEAT_HZ = 10.0
-"""PX4's HEARTBEAT rate on the link we start (its own default: 1 Hz)."""
-
-
 def _mavlink_script(ports: Px4Ports) -> str:
     """PX4's offboard/API link alone (as px4-rc.mavlink starts it), on our ports; no other link."""
     local, remote = ports.mavlink_udp, ports.mavlink_remote_udp
@@ -317,8 +314,6 @@ def _mavlink_script(ports: Px4Ports) -> str:
         "#!/bin/sh",
         _OUR_HOOK.format("px4-rc.mavlink"),
         f"mavlink start -x -u {local} -r 4000000 -f -m onboard -o {remote}",
-        # PX4 sends HEARTBEAT (armed, flight mode) at 1 Hz; a client confirms every mode change from it,
-        # so an operator's Hold showed in telemetry up to a second late. 10 Hz: within 0.1 s.
-        f"mavlink stream -u {local} -s HEARTBEAT -r {HEARTBEAT_HZ:g}",
+        f"mavlink stream -u {local} -s HEARTBEAT -r {HEARTBEAT_HZ:g}",  # PX4's 1 Hz: modes a second late
     ]
     return "\n".join(lines) + "\n"
