@@ -28,6 +28,8 @@ from controller.console.run import ConsoleOptions, open_console
 from controller.missions.schema import Mission
 from flight.types import FlightMode
 
+OFFBOARD = FlightMode.OFFBOARD
+
 POLL_S = 0.01
 STEPS_JS = "window.consoleStats.steps"
 
@@ -123,7 +125,7 @@ def run_console_bench(settings: ConsoleBenchSettings) -> ConsoleBenchResult:
                 result.notes.append(f"hold {i + 1}: the loop did not start ({said}); skipped")
                 continue
             time.sleep(rng.uniform(0.05, 0.5))
-            if session.phase.value != "centring":
+            if session.phase.value != "centring" or session.vehicle.telemetry().flight_mode is not OFFBOARD:
                 result.notes.append(f"hold {i + 1}: the loop had ended before the click; skipped")
                 continue
             page.click("#btn-hold")
@@ -133,7 +135,7 @@ def run_console_bench(settings: ConsoleBenchSettings) -> ConsoleBenchResult:
                 result.hold_s.append(round(seen - record["pressed_s"], 4))
                 result.hold_to_thread_s.append(round(record["started_s"] - record["pressed_s"], 4))
                 result.hold_call_s.append(round(record.get("done_s", seen) - record["started_s"], 4))
-            _until("the loop stopped", lambda: session.phase.value == "holding", 30)
+            _until("the loop stopped", lambda: not pilot.busy, 30)
         result.hold_summary = _quantiles(result.hold_s)
         return result
 

@@ -221,6 +221,12 @@ class Pilot:
             self._say("the commanding page closed: holding", "warning")
             self.command("hold")
 
+    @property
+    def busy(self) -> bool:
+        """Whether an operation (take off, centre) is running."""
+        with self._lock:
+            return self._operation is not None
+
     # --- operations ---------------------------------------------------------------------------
     def _start(self, activity: str, instruction: str | None, job: Callable[[], None]) -> str | None:
         with self._lock:
