@@ -169,6 +169,27 @@ def test_bad_messages_get_one_line_and_change_nothing(served, message: str, said
     assert (operator.commands, operator.instructions) == before
 
 
+def test_a_page_gets_frames_only_as_fast_as_it_draws_them(served) -> None:
+    url, _, _, server = served
+    with _ws(url) as ws:
+        _until(ws, "hello")
+        for n in range(6):  # six frames published, the page drawing none
+            server.hub.publish_frame(b"frame %d" % n)
+            time.sleep(0.05)
+        got = []
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline:
+            try:
+                message = ws.recv(timeout=0.1)
+            except TimeoutError:
+                continue
+            if isinstance(message, bytes):
+                got.append(message)
+        assert got == [b"frame 0", b"frame 1"]  # two in flight, no queue of old ones behind them
+        ws.send('{"type":"frame_drawn"}')
+        assert ws.recv(timeout=2) == b"frame 5"  # then the newest, not the next in line
+
+
 def test_a_page_fetches_the_report_and_each_instruction_and_nothing_else(served) -> None:
     url, _, _, _ = served
     status, body = _get(url + "reports/report.json")

@@ -2,8 +2,9 @@
 
 `Hub` keeps one `Page` per open WebSocket. Messages (JSON) and video frames (JPEG) are published from
 any thread (the loop's, the camera's, the monitor's) and handed to the server's event loop; each page
-has its own sender, which sends every message in order and, for the video, only the newest frame: a
-slow page skips frames, it never builds a backlog or slows another page.
+has its own sender, which sends every message in order and, for the video, only the newest frame, and
+only while the page keeps up (it says `frame_drawn` after each): a slow page skips frames, it never
+builds a backlog or slows another page.
 
 `CommandSeat` is the lock of the issue: the first page to open takes it and commands, every other page
 watches; the seat is free again when its page disconnects (and another page may take it).
@@ -25,6 +26,10 @@ log = logging.getLogger(__name__)
 
 MAX_QUEUED_MESSAGES = 512
 """A page this far behind on messages is closed (it would otherwise grow the server's memory)."""
+FRAMES_IN_FLIGHT = 2
+"""Frames sent to a page before it says it drew one: a page that draws slowly gets fewer frames, never a
+queue of old ones (the camera-to-page latency stays a frame or two, whatever the page's speed)."""
+DRAWN_TIMEOUT_S = 2.0
 
 
 @dataclass
@@ -38,17 +43,30 @@ class Page:
     frame: bytes | None = None
     wake: asyncio.Event = field(default_factory=asyncio.Event)
     closed: bool = False
+    in_flight: int = 0
+    """Frames sent that the page has not said it drew (`frame_drawn`): at most `FRAMES_IN_FLIGHT`."""
+    last_sent_s: float = 0.0
 
     async def run_sender(self) -> None:
-        """Send queued messages first, then the newest frame, until the page closes."""
+        """Send queued messages first, then the newest frame while the page keeps up, until it closes."""
+        loop = asyncio.get_running_loop()
         while not self.closed:
             await self.wake.wait()
             self.wake.clear()
             while not self.messages.empty():
                 await self.send_text(self.messages.get_nowait())
-            frame, self.frame = self.frame, None
-            if frame is not None:
+            if self.in_flight >= FRAMES_IN_FLIGHT and loop.time() - self.last_sent_s > DRAWN_TIMEOUT_S:
+                self.in_flight = 0  # a page that stopped saying so (an old script): go on, slowly
+            if self.frame is not None and self.in_flight < FRAMES_IN_FLIGHT:
+                frame, self.frame = self.frame, None
+                self.in_flight += 1
+                self.last_sent_s = loop.time()
                 await self.send_bytes(frame)
+
+    def drawn(self) -> None:
+        """The page drew a frame: room for the next."""
+        self.in_flight = max(0, self.in_flight - 1)
+        self.wake.set()
 
 
 class CommandSeat:

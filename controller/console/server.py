@@ -43,6 +43,8 @@ log = logging.getLogger(__name__)
 MAX_MESSAGE_BYTES = 4096
 """The largest message a page may send (an instruction is a line of text)."""
 START_TIMEOUT_S = 10.0
+FRAME_DRAWN = '{"type":"frame_drawn"}'
+"""What the page sends after drawing each frame, exactly (`FrameDrawnMessage`)."""
 STATIC_FILES = {"console.js": "text/javascript", "console.css": "text/css"}
 REPORT_FILES = ("report.json", "camera.gif", "trajectory.png")
 """What a page may fetch of the session's report folder: the report and its pictures, nothing else."""
@@ -76,7 +78,15 @@ class TakeSeatMessage(_Inbound):
     type: Literal["take_command"]
 
 
-Inbound = Annotated[InstructionMessage | CommandMessage | TakeSeatMessage, Field(discriminator="type")]
+class FrameDrawnMessage(_Inbound):
+    """The page drew a video frame (flow control: `hub.FRAMES_IN_FLIGHT`); any page may say it."""
+
+    type: Literal["frame_drawn"]
+
+
+Inbound = Annotated[
+    InstructionMessage | CommandMessage | TakeSeatMessage | FrameDrawnMessage, Field(discriminator="type")
+]
 INBOUND = TypeAdapter(Inbound)
 
 
@@ -205,7 +215,10 @@ async def _serve_page(websocket: WebSocket, hub: Hub, operator: Operator) -> Non
     try:
         while True:
             text = await websocket.receive_text()
-            reply = await _handle(text, page.page_id, hub, operator)
+            if text == FRAME_DRAWN:  # the most frequent message, answered without parsing
+                page.drawn()
+                continue
+            reply = await _handle(text, page, hub, operator)
             if reply is not None:
                 hub.publish({"type": "message", "level": "warning", "text": reply}, page_id=page.page_id)
     except (WebSocketDisconnect, RuntimeError, KeyError):  # closed, or sent bytes where text was expected
@@ -226,8 +239,9 @@ def _say_seat(hub: Hub) -> None:
     hub.publish({"type": "seat", "holder": hub.seat.holder, "pages": hub.page_count()}, keep=True)
 
 
-async def _handle(text: str, page_id: int, hub: Hub, operator: Operator) -> str | None:
+async def _handle(text: str, page: Page, hub: Hub, operator: Operator) -> str | None:
     """One message from a page; the line to show it when the message is refused, else None."""
+    page_id = page.page_id
     if len(text.encode()) > MAX_MESSAGE_BYTES:
         return f"message refused: over {MAX_MESSAGE_BYTES} bytes"
     try:
@@ -236,6 +250,9 @@ async def _handle(text: str, page_id: int, hub: Hub, operator: Operator) -> str 
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"]) or "message"
         return f"message refused: {where}: {first['msg']}"
+    if isinstance(message, FrameDrawnMessage):
+        page.drawn()
+        return None
     if isinstance(message, TakeSeatMessage):
         if not hub.seat.take(page_id):
             return "another page commands; this one watches (it may take the seat when that page closes)"

@@ -7,7 +7,8 @@ const $ = (id) => document.getElementById(id);
 const canvas = $("video");
 const ctx = canvas.getContext("2d");
 const VIDEO_LOST_MS = 1500;
-const STALE_FRAMES = 3;
+const STALE_FRAMES = 6;
+const FRAME_DRAWN = '{"type":"frame_drawn"}';
 
 const state = {
   socket: null, page: null, holder: null, hello: null, flying: false, activity: "idle",
@@ -171,7 +172,7 @@ function showLog(entries) {
       const a = document.createElement("a");
       a.href = e.report;
       a.target = "_blank";
-      a.textContent = "report.json";
+      a.textContent = `report #${e.number}`;
       link.appendChild(a);
     }
     row.appendChild(link);
@@ -180,7 +181,31 @@ function showLog(entries) {
 }
 
 // ------------------------------------------------------------------ video
-async function onFrame(buffer) {
+// Frames are decoded one at a time: one that arrives meanwhile waits, replaced by any newer one, so a
+// slow page shows the newest frame rather than a queue of old ones. After drawing, the page says so:
+// the server sends at most two frames ahead of what was drawn.
+let decoding = false;
+let waiting = null;
+
+function frameDone() {
+  if (state.socket && state.socket.readyState === WebSocket.OPEN) state.socket.send(FRAME_DRAWN);
+}
+
+function onFrame(buffer) {
+  if (decoding) {
+    if (waiting) frameDone();  // an older waiting frame is dropped: done with it too
+    waiting = buffer;
+    return;
+  }
+  decoding = true;
+  showFrame(buffer).finally(() => {
+    decoding = false;
+    frameDone();
+    if (waiting) { const next = waiting; waiting = null; onFrame(next); }
+  });
+}
+
+async function showFrame(buffer) {
   const length = new DataView(buffer).getUint32(0);
   const header = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 4, length)));
   const jpeg = new Blob([new Uint8Array(buffer, 4 + length)], { type: "image/jpeg" });
