@@ -32,9 +32,8 @@ from typing import Any, Protocol
 from controller.console.hub import Hub
 from controller.console.views import ACTION_NAMES, detections_view, step_view, telemetry_view
 from controller.missions.session import Phase
-from controller.planning.grounding import InstructionRefused, TargetQuery, understand
+from controller.planning.grounding import InstructionRefused, TargetQuery
 from controller.planning.loop_records import StepRecord
-from drone_inspect_core.vocabulary import Vocabulary
 from flight.errors import LinkLostError
 from flight.types import Telemetry
 from flight.vehicle import Vehicle
@@ -56,8 +55,6 @@ GROUNDED = (Phase.ON_GROUND, Phase.LANDED, Phase.KILLED)
 class Session(Protocol):
     """What the console needs of a flight session (`controller.missions.session.FlightSession`)."""
 
-    vocabulary: Vocabulary
-
     @property
     def vehicle(self) -> Vehicle: ...
 
@@ -71,6 +68,8 @@ class Session(Protocol):
     def phase(self) -> Phase: ...
 
     def telemetry(self) -> Telemetry | None: ...
+
+    def understand(self, instruction: str) -> TargetQuery: ...
 
     def take_off(self) -> None: ...
 
@@ -152,7 +151,6 @@ class Pilot:
         self._instruction: str | None = None
         self._closing = threading.Event()
         self._seen: tuple[Detection, ...] = ()
-        self._frame_size: tuple[int, int] | None = None
         self._link = "ok"
         self._video = "ok"
         self._phase = session.phase
@@ -186,7 +184,7 @@ class Pilot:
     def instruct(self, text: str) -> str | None:
         """Centre on `text` (see the module docstring); None when the loop started, else why not."""
         try:
-            query = understand(text, self.session.vocabulary)
+            query = self.session.understand(text)
         except InstructionRefused as exc:
             return str(exc)
         with self._lock:
@@ -257,7 +255,8 @@ class Pilot:
 
     def _take_off(self) -> None:
         self.session.take_off()
-        self._say("took off: the vehicle holds; type an instruction", "info")
+        if self.session.phase is Phase.HOLDING:
+            self._say("took off: the vehicle holds; type an instruction", "info")
 
     def _centre(self, text: str, query: TargetQuery) -> None:
         entry = LogEntry(len(self.log_entries) + 1, text)
