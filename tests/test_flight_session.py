@@ -178,3 +178,53 @@ def test_kill_stops_the_motors_and_nothing_flies_after_it(tmp_path: Path) -> Non
             session.take_off()
     assert "land" not in vehicle.calls
     assert session.result is not None and not session.result.passed
+
+
+def test_a_target_out_of_view_where_the_vehicle_holds_is_looked_for_again_from_the_start(
+    tmp_path: Path,
+) -> None:
+    """From the start both valves are in view; centred on one, the other is 155 px off (out of the image)."""
+    west, east = WallTarget("valve", "red", -0.8, 0.0, 0.9), WallTarget("valve", "blue", 0.8, 0.0, 0.9)
+    vehicle = FakeVehicle.at_pose(east_m=0.0)
+    detector = FakeMultiTargetDetector(vehicle, [west, east])
+    mission = parse_mission(
+        {"name": "m", "planner": "classic", "instructions": ["the red valve", "the blue valve"]}
+    )
+    result = fly_kit(kit_for(vehicle, detector), mission, tmp_path, LIMITS)
+    assert result.passed, result.failures
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert [e["returned_to_start"] for e in report["instructions"]] == [False, True]
+    assert report["instructions"][1]["records"][0]["event"] == "not_found"  # not seen where it held
+    assert vehicle.east_m == pytest.approx(0.8, abs=EPSILON / PX_PER_M)
+    no_return = parse_mission(
+        {**mission.model_dump(mode="json", exclude_unset=True), "return_to_start": False}
+    )
+    vehicle = FakeVehicle.at_pose(east_m=0.0)
+    result = fly_kit(
+        kit_for(vehicle, FakeMultiTargetDetector(vehicle, [west, east])), no_return, tmp_path / "b", LIMITS
+    )
+    assert [i["outcome"] for i in result.instructions] == [
+        "centred",
+        "target_not_found",
+    ] and not result.passed
+
+
+def test_a_last_step_without_truth_is_judged_on_the_truth_read_when_the_loop_ended(tmp_path: Path) -> None:
+    """A simulator's /truth.json that times out at the last step (under load) costs no centred instruction;
+    with no truth at all the instruction cannot pass."""
+    vehicle, detector = started()
+    mission = parse_mission(
+        {"name": "m", "planner": "classic", "instructions": ["the gauge", "the red valve"]}
+    )
+    kit = kit_for(vehicle, detector)
+    kit.truth_probe = lambda: None  # every step's truth lost; the truth of every target still answers
+    result = fly_kit(kit, mission, tmp_path / "a", LIMITS)
+    assert result.passed, result.failures
+    assert all(i["final_truth_error_px"] <= EPSILON for i in result.instructions)
+    vehicle, detector = started()
+    kit = kit_for(vehicle, detector)
+    kit.truth_probe, kit.targets_truth = (lambda: None), (lambda: None)
+    result = fly_kit(kit, mission, tmp_path / "b", LIMITS)
+    assert (
+        not result.passed and "target not in view at the end per truth" in result.instructions[0]["failures"]
+    )

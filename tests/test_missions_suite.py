@@ -54,7 +54,7 @@ def test_regression_suite_in_process_passes(tmp_path: Path) -> None:
 @pytest.mark.timeout(240)  # the sim-vehicle boot and every MAVSDK wait have their own timeouts inside
 def test_regression_suite_hil_mission_passes(tmp_path: Path) -> None:
     """The hardware-in-the-loop mission: sim-vehicle subprocess, MAVSDK over UDP, MJPEG stream, .tlog."""
-    options = SuiteOptions(report_dir=tmp_path, tags=("hil",))
+    options = SuiteOptions(report_dir=tmp_path, tags=("hil",), exclude_tags=("sequence",))
     suite = run_suite(REGRESSION, options)
     assert len(suite.results) == 1
     assert suite.passed, format_table(suite)

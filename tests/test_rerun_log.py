@@ -130,3 +130,32 @@ def test_benchmark_missions_record_each_mission_in_its_report_folder(tmp_path: P
     for folder in folders:
         steps = json.loads((folder / "report.json").read_text())["instructions"][0]["records"]
         assert _columns(folder / MISSION_RRD)["camera/image"]["step"] == [s["index"] for s in steps]
+
+
+def test_each_instruction_of_a_flight_is_visible_in_the_recording(tmp_path: Path) -> None:
+    """Three instructions, one flight (fakes): each instruction's text on its own `instruction` time, every
+    frame on the instruction it served, the `step` time counted over the whole flight."""
+    from fake_vehicle import FakeVehicle
+    from mission_fakes import FakeMultiTargetDetector
+    from test_flight_session import LIMITS, WALL, kit_for
+
+    from controller.missions.runner import fly_kit
+
+    vehicle = FakeVehicle.at_pose(east_m=-0.3, up_m=0.2)
+    mission = parse_mission(
+        {
+            "name": "three",
+            "planner": "classic",
+            "instructions": ["the gauge", "the red valve", "the switch box"],
+        }
+    )
+    kit = kit_for(vehicle, FakeMultiTargetDetector(vehicle, WALL))
+    result = fly_kit(kit, mission, tmp_path, LIMITS, media=False, rerun_path=tmp_path / "flight.rrd")
+    assert result.passed, result.failures
+    data = _columns(tmp_path / "flight.rrd")
+    said = sorted(zip(data["instruction"]["instruction"], data["instruction"]["TextLog:text"], strict=True))
+    assert said == [(1, ["1: the gauge"]), (2, ["2: the red valve"]), (3, ["3: the switch box"])]
+    report = json.loads((tmp_path / "report.json").read_text())
+    served = [entry["index"] for entry in report["instructions"] for _ in entry["records"]]
+    images = data["camera/image"]  # chunks come back in no fixed order: by step
+    assert sorted(zip(images["step"], images["instruction"], strict=True)) == list(enumerate(served))

@@ -14,10 +14,20 @@ the kind alone would not say which. `absent` (a fraction): those missions' instr
 name a target the scene does not hold (a kind not on the wall, else a colour no target of
 that kind has) and expect `target_not_found`. One target, no phrases, nothing absent:
 today's missions exactly ("center the <kind>", resolved by the kit).
+
+Several instructions per flight (`instructions_per_flight` N > 1, with `targets` >= N): each flight
+names N of its scene's targets in turn, the named one first, then the others in the scene's order, each
+with a phrase of the corpus (its colour where its kind repeats on the wall); the flight takes off once
+and must centre each (per truth, on that instruction's own target). The start is where the operator
+would put the drone for such a sequence: in front of the targets, far enough from the wall that all N
+of them are within `SEQUENCE_VIEW` of the half view (the distance drawn from `distance_m`, raised where
+needed; a scene whose targets need more than `SEQUENCE_MAX_DISTANCE_M` is skipped), the group's middle
+at the image centre give or take the slack left, heading square to the wall.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
@@ -30,6 +40,10 @@ from controller.training.instructions import builtin_templates
 from controller.training.phrasing import describe
 from drone_inspect_core.vocabulary import Vocabulary, colour_name
 
+SEQUENCE_VIEW = 0.75
+"""A sequence flight's start has every target within this fraction of the half view (width and height)."""
+SEQUENCE_MAX_DISTANCE_M = 3.2
+"""The farthest start of a sequence flight: a scene whose targets need more is skipped."""
 ABSENT_TAG = "absent"
 """The tag of a benchmark mission whose instruction names a target the scene does not hold."""
 CORPORA = ("train", "heldout")
@@ -58,6 +72,8 @@ class BenchmarkConfig:
     targets, twins or absent missions, else today's "center the <kind>"."""
     absent: float = 0.0
     """The fraction of missions whose instruction names a target the scene does not hold."""
+    instructions_per_flight: int = 1
+    """Instructions per flight: N > 1 names N of the scene's targets in turn (see the module docstring)."""
     parallel: int = 1
     ray: str | None = None
     """Run the missions on Ray: "local" (a private local Ray of `parallel` CPUs) or a cluster's address."""
@@ -90,6 +106,15 @@ class BenchmarkConfig:
             raise ValueError(f"instructions must be one of {CORPORA}, got {self.instructions!r}")
         if not 0.0 <= self.absent <= 1.0:
             raise ValueError(f"absent must be a fraction in [0, 1], got {self.absent:g}")
+        if self.instructions_per_flight < 1:
+            raise ValueError(f"instructions per flight must be >= 1, got {self.instructions_per_flight}")
+        if self.instructions_per_flight > self.base.targets:
+            raise ValueError(
+                f"{self.instructions_per_flight} instructions per flight need as many targets per scene "
+                f"(--targets {self.instructions_per_flight}), got {self.base.targets}"
+            )
+        if self.instructions_per_flight > 1 and self.absent > 0:
+            raise ValueError("absent targets go with one instruction per flight")
 
     @property
     def corpus(self) -> str | None:
@@ -144,7 +169,15 @@ def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozen
             **({"faults": {**faults, "seed": seed}} if base.faults.any else {}),
         }  # fmt: skip
         mission = parse_mission(data)
-        if config.corpus is not None:
+        if config.instructions_per_flight > 1:
+            try:
+                sequence = sequence_for(mission, config)
+            except SceneLayoutError:
+                continue
+            if sequence is None:  # the targets do not fit in one view from the farthest start
+                continue
+            mission = parse_mission({**data, **sequence})
+        elif config.corpus is not None:
             try:
                 mission = parse_mission(
                     {**data, "instruction": instruction_for(mission, config.corpus, absent)}
@@ -153,6 +186,46 @@ def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozen
                 continue
         missions.append(mission)
     return missions
+
+
+def sequence_for(mission: Mission, config: BenchmarkConfig) -> dict[str, Any] | None:
+    """A sequence flight's `instructions` and `start` for `mission`'s scene (see the module docstring);
+    None when its targets do not fit in one view. Raises `SceneLayoutError` when they do not fit on the
+    wall."""
+    from controller.missions.setup import scene_config_for  # the simulator's scene code: only when drawn
+    from sim_world.rendering.camera import CameraConfig
+    from sim_world.scene.sampling import sample_scene
+
+    seed = mission.scene.seed
+    scene = sample_scene(scene_config_for(mission), seed)
+    targets = scene.targets[: config.instructions_per_flight]
+    kinds = [t.kind for t in scene.targets]
+    corpus = config.corpus or "heldout"
+    words, rng = _draw(seed, 1), _draw(seed, 3)
+    phrases = []
+    for target in targets:
+        repeats = mission.twins or kinds.count(target.kind) > 1
+        name = TargetQuery(target.kind, colour_name(target.bezel_colour) if repeats else None)
+        phrases.append(describe(name, builtin_templates(corpus), corpus, words))
+    east = [t.east_m for t in targets]
+    up = [t.height_m for t in targets]
+    middle_east, middle_up = (max(east) + min(east)) / 2, (max(up) + min(up)) / 2
+    half_e, half_u = (max(east) - min(east)) / 2, (max(up) - min(up)) / 2
+    tan_half = math.tan(math.radians(CameraConfig().hfov_deg) / 2)  # a square image: the same vertically
+    need_m = max(half_e, half_u) / (SEQUENCE_VIEW * tan_half)
+    distance_m = max(float(rng.uniform(*config.distance_m)), need_m)
+    if distance_m > SEQUENCE_MAX_DISTANCE_M:
+        return None
+    slack_e = max(0.0, SEQUENCE_VIEW * tan_half * distance_m - half_e)  # how far the group may sit off centre
+    slack_u = max(0.0, SEQUENCE_VIEW * tan_half * distance_m - half_u)
+    named = targets[0]
+    start = {
+        "right_m": middle_east - named.east_m + float(rng.uniform(-slack_e, slack_e)),
+        "up_m": middle_up - named.height_m + float(rng.uniform(-slack_u, slack_u)),
+        "distance_m": distance_m,
+        "yaw_deg": 0.0,
+    }
+    return {"instructions": phrases, "start": start}
 
 
 def instruction_for(mission: Mission, corpus: str, absent: bool) -> str:

@@ -172,6 +172,8 @@ def summarise(config: BenchmarkConfig, results: list[MissionResult], wall_s: flo
                 o: sum(r.outcome == o for r in every.values()) for o in {r.outcome for r in every.values()}
             },
         }
+        if config.instructions_per_flight > 1:
+            planners[planner]["per_instruction"] = per_instruction(list(rows.values()), config)
     summary = {
         "config": config.as_json(),
         "wall_s": round(wall_s, 1),
@@ -193,6 +195,29 @@ def summarise(config: BenchmarkConfig, results: list[MissionResult], wall_s: flo
                 "n": len(ready),
             }
     return summary
+
+
+def per_instruction(results: list[MissionResult], config: BenchmarkConfig) -> dict[str, Any]:
+    """Flights of several instructions, counted per instruction: centred (the instruction passed: centred
+    within ε per truth on its own target, within the step budget), wrong-target centrings, not found,
+    looked for again from the start; and centred by place in the flight (1st, 2nd, ...). An instruction
+    its flight never reached (an error before it) counts as flown and not centred."""
+    n = config.instructions_per_flight
+    flown = [entry for r in results for entry in r.instructions]
+    return {
+        "instructions": len(results) * n,
+        "centred": sum(entry["passed"] for entry in flown),
+        "wrong_target": sum(entry["wrong_target"] for entry in flown),
+        "not_found": sum(entry["outcome"] == "target_not_found" for entry in flown),
+        "returned_to_start": sum(entry.get("returned_to_start", False) for entry in flown),
+        "flights_all_centred": sum(
+            len(r.instructions) == n and all(e["passed"] for e in r.instructions) for r in results
+        ),
+        "centred_by_place": [
+            sum(1 for r in results for e in r.instructions if e["index"] == place and e["passed"])
+            for place in range(1, n + 1)
+        ],
+    }
 
 
 LOOP_TIMEOUT_SLACK_S = 10.0
@@ -281,6 +306,10 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"wall, {n['over_timeout']} over the timeout, "
             f"{len(limits['reports_incomplete'])} reports incomplete"
         )
+    if cfg.get("instructions_per_flight", 1) > 1:
+        lines.append(
+            f"{cfg['instructions_per_flight']} instructions per flight (one take-off), each on its own target"
+        )
     any_absent = any(p.get("absent", {}).get("missions") for p in summary["planners"].values())
     lines.append(
         f"{'planner':<8} {'success':>15} {'mean steps':>10} {'/oracle':>8} {'offset px mean/p95/max':>23} "
@@ -299,7 +328,23 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"{refinements:>16} {seconds:>14} {num(p['overhead_ms_mean'], '.1f'):>11} "
             f"{p.get('wrong_target', 0):>12}" + (f" {_absent_cell(p['absent']):>26}" if any_absent else "")
         )
+    for name, p in summary["planners"].items():
+        if "per_instruction" in p:
+            lines.append(_per_instruction_line(name, p["per_instruction"]))
     return "\n".join(lines)
+
+
+def _per_instruction_line(planner: str, counts: dict[str, Any]) -> str:
+    """ "latent per instruction: 297/300 centred (99.0%), ..." """
+    n = counts["instructions"]
+    by_place = ", ".join(f"{k}/{n // len(counts['centred_by_place'])}" for k in counts["centred_by_place"])
+    return (
+        f"{planner} per instruction: {counts['centred']}/{n} centred "
+        f"({100 * counts['centred'] / n if n else 0:.1f}%), {counts['wrong_target']} wrong target, "
+        f"{counts['not_found']} not found, {counts.get('returned_to_start', 0)} looked for again from the "
+        f"start; by place in the flight {by_place}; "
+        f"{counts['flights_all_centred']} flights with every instruction centred"
+    )
 
 
 def _absent_cell(absent: dict[str, int]) -> str:

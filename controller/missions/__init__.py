@@ -4,7 +4,8 @@
 - `setup`: what a mission's world is (scene, start, wind, link faults), shared by the kits;
 - `kits/`: building a mission's vehicle, camera, detector and planner for each way to fly
   (`sim` in-process, `mavlink`: sim-vehicle and a real vehicle, `px4_sitl`);
-- `runner`: one flight (connect, take off, the centring loop, land) and its report;
+- `session`: one flight (connect, take off, the centring loop for each instruction, land, and the
+  operator's hold/land/kill from any thread) and its report; `runner`: a mission flown as a session;
 - `results`: a flown mission as a row, and the judge of its expectations;
 - `report`: the report folder; `suite`, `benchmark`, `fault_matrix`: many missions.
 """

@@ -3,8 +3,9 @@
 An instruction is judged as a one-instruction mission always was (`results.judge`: its expected outcome,
 centred within ε per truth where there is truth, its step budget, a wrong-target centring never passes),
 against its own expectations (`MissionInstruction.expect`, else the mission's), on the truth of the
-target it names (`controller.missions.truth`). The flight passes when every instruction the mission
-planned was flown and passed and nothing failed.
+target it names (`controller.missions.truth`); where the last step's truth did not come (a simulator's
+`/truth.json` that timed out) but the detector saw the target, on the truth read when the loop ended.
+The flight passes when every instruction the mission planned was flown and passed and nothing failed.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from controller.missions.results import (
     wrong_target,
 )
 from controller.missions.schema import MissionInstruction
-from controller.missions.truth import named_indices
+from controller.missions.truth import named_indices, named_offset
 from controller.planning.grounding import TargetQuery
 from controller.planning.loop_records import Outcome, StepRecord, count_refinements, count_second_choices
 
@@ -39,6 +40,7 @@ def judge_instruction(
     error: str | None,
     wall_s: float,
     vehicle_s: float,
+    returned_to_start: bool = False,
 ) -> InstructionResult:
     """One instruction's result: its loop's `steps` and `outcome`, judged (see the module docstring)."""
     kit, epsilon_px = session.kit, session.epsilon_px
@@ -46,6 +48,10 @@ def judge_instruction(
     final_detector = steps[-1].offset_px if steps else None
     targets = kit.targets_truth() if kit.targets_truth is not None and error is None else None
     offsets = None if targets is None else [t.offset_px for t in targets]
+    if final_truth is None and targets is not None and steps and steps[-1].detection is not None:
+        # The last step's truth did not come (a simulator's /truth.json timed out under load) while the
+        # detector saw the target: judge by the truth read when the loop ended, the vehicle holding.
+        final_truth = named_offset(targets, query)
     named = (0,) if targets is None else named_indices(targets, query)
     wrong = wrong_target(outcome, epsilon_px, final_truth, offsets, named)
     n_steps = count_steps(steps)
@@ -75,6 +81,7 @@ def judge_instruction(
         vehicle_s=round(vehicle_s, 3),
         wall_s=round(wall_s, 3),
         error=error,
+        returned_to_start=returned_to_start,
         records=tuple(steps),
     )
 

@@ -170,6 +170,8 @@ class InstructionResult:
     vehicle_s: float
     wall_s: float
     error: str | None = None
+    returned_to_start: bool = False
+    """Its target was not in view where the vehicle held, and it flew back to the start to look again."""
     records: tuple[StepRecord, ...] = field(default=(), repr=False, compare=False)
     """The loop's step records (frames included): for a caller's own use; not in `summary()`."""
 

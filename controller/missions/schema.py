@@ -42,9 +42,11 @@ ardupilot: {instance: auto, speed: 1.0}  # vehicle: ardupilot-sitl only (--ardup
 `max_steps`, and `timeout_s`) from where the previous one left the drone, holding in between; a plain
 string is judged by the mission's `expect`, a mapping may give its own `expect` (replacing the
 mission's for that instruction). The mission passes when every instruction meets its expectation.
-An instruction that names a target the scene lacks, or one out of view, ends `target_not_found`
-and the flight goes on to the next. The scene's named target (`target_kind`, `target_attribute`,
-`twins`) is the one the first instruction names; the other targets are the scene's others.
+An instruction whose target is not in view where the vehicle holds flies back to where the flight
+started and looks again there (`return_to_start`); one that names a target the scene lacks, or one
+not in view from there either, ends `target_not_found` and the flight goes on to the next. The
+scene's named target (`target_kind`, `target_attribute`, `twins`) is the one the first instruction
+names; the other targets are the scene's others.
 
 `start` is the drone's pose relative to the pose that centres the target (in front
 of it, looking at the wall): `right_m` > 0 puts the drone to the right of that pose, so
@@ -327,6 +329,10 @@ class Mission(StrictModel):
     """The loop stops at ε − this per detector (None: 2 px at 224 px width, scaled); must be < ε."""
     max_steps: int = Field(default=20, ge=1, le=500)
     timeout_s: float = Field(default=120.0, gt=0.0)
+    return_to_start: bool = True
+    """An instruction whose target is not in view where the vehicle holds (a flight of several: the last
+    one left it elsewhere) flies back across the wall to where the flight started, and looks again there,
+    before it ends `target_not_found`. The start is where the operator set up the view of the wall."""
     takeoff_altitude_m: float = Field(default=1.5, gt=0.3, le=4.0)
     wind: WindConfig | None = None
     loop: LoopSettings = LoopSettings()
@@ -496,6 +502,11 @@ class Mission(StrictModel):
             raise ValueError("detector: 'truth' needs the simulator; a real vehicle uses the image detector")
         if self.vehicle != SIM and self.detector == "truth":
             raise ValueError("detector: 'truth' is available in the in-process sim only (vehicle: sim)")
+        if self.detector == "truth" and len(self.instructions) > 1:
+            raise ValueError(
+                "detector: 'truth' sees the scene's named target only; several instructions need the image "
+                "detector (detector: image)"
+            )
         if self.vehicle not in (SIM, PX4_SITL, ARDUPILOT_SITL) and self.wind is not None:
             raise ValueError("wind: only the worlds of 'sim', 'px4-sitl' and 'ardupilot-sitl' simulate wind")
         mavlink_sim = self.vehicle in (SIM_MAVLINK, PX4_SITL, ARDUPILOT_SITL)

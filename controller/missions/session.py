@@ -40,6 +40,7 @@ in the report and stops, never the flight.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -54,26 +55,23 @@ from controller.missions.flight_results import finish_flight, judge_instruction
 from controller.missions.interrupts import OperatorStop, StoppableVehicle
 from controller.missions.kits import open_kit
 from controller.missions.kits.base import FlightKit, LoadedModels
+from controller.missions.loop_setup import epsilon_for, loop_config, mission_vocabulary
 from controller.missions.report import ReportWriter
 from controller.missions.results import InstructionResult, MissionResult
 from controller.missions.schema import Mission, MissionInstruction
 from controller.planning.grounding import TargetQuery, understand
 from controller.planning.loop import CentringLoop
 from controller.planning.loop_records import CentringConfig, Outcome, StepRecord
-from drone_inspect_core.centring import default_epsilon_px
+from drone_inspect_core.frames import world_ned_to_heading
 from drone_inspect_core.signing import SigningKey
-from drone_inspect_core.vocabulary import Vocabulary
-from flight.moves import take_off_to_start
+from flight.moves import fly_offset, take_off_to_start
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, safe_stop
 from flight.signals import StopRequested
-from flight.types import Telemetry, VelocityBody
+from flight.types import PositionNed, Telemetry, VelocityBody
 
 log = logging.getLogger(__name__)
 
-FAST_SIM_FRESH_FRAME_S = 0.1
-"""A sim-vehicle off real time: a frame must arrive this long after an observation begins (render,
-JPEG and HTTP take a few tens of ms of wall time, which at ×8 are a few tenths of a simulated second)."""
 INTERRUPT_WAIT_S = 30.0
 """How long an interrupt on a simulated-clock vehicle waits for the running operation to stop (it stops
 at its next vehicle call; a camera read or a detection can delay that a little)."""
@@ -99,44 +97,6 @@ class Phase(str, Enum):
 class SessionError(RuntimeError):
     """An operation the session cannot do now: another one runs, or the vehicle is not where it must be
     (centre before take-off, take off after a kill, anything after the session closed)."""
-
-
-def epsilon_for(mission: Mission, kit: FlightKit) -> float:
-    """ε for this flight: the kit's (tests fix it), else the mission's, else the default for the width."""
-    return kit.epsilon_px or mission.epsilon_px or default_epsilon_px(kit.image_width_px)
-
-
-def mission_vocabulary(mission: Mission) -> Vocabulary:
-    """The words of a mission: the shipped ones, the kinds of its scene (a file's too, for a simulated
-    vehicle) and of the mission itself, and its glossary."""
-    if mission.is_real:
-        return mission.vocabulary
-    from controller.missions.setup import scene_config_for  # the simulator's scene code: simulated only
-
-    return scene_config_for(mission).vocabulary.with_glossary(mission.glossary_words())
-
-
-def loop_config(
-    mission: Mission,
-    epsilon_px: float,
-    instruction: str,
-    target: TargetQuery | None = None,
-    vocabulary: Vocabulary | None = None,
-) -> CentringConfig:
-    """The loop's configuration for one instruction of `mission`. The instruction is understood here,
-    before anything flies: one the vocabulary cannot act on raises `InstructionRefused` naming its word."""
-    vocabulary = vocabulary or mission_vocabulary(mission)
-    return CentringConfig(
-        **mission.loop.model_dump(),
-        epsilon_px=epsilon_px,
-        instruction=instruction,
-        target=target or understand(instruction, vocabulary),
-        vocabulary=vocabulary,
-        max_steps=mission.max_steps,
-        timeout_s=mission.timeout_s,
-        stop_margin_px=mission.stop_margin_px,
-        **({"fresh_frame_s": FAST_SIM_FRESH_FRAME_S} if mission.sim_speed != 1.0 else {}),
-    )
 
 
 class FlightSession:
@@ -184,6 +144,8 @@ class FlightSession:
         self._clock: dict[str, float] = {}
         self.vehicle_start_s: float | None = None  # vehicle clock, after the first take-off
         self.vehicle_end_s: float | None = None  # vehicle clock, when the last centring ended
+        self.start_position: PositionNed | None = None
+        """Where the first take-off left the vehicle (local NED): where `return_to_start` looks again."""
         self._last_telemetry: Telemetry | None = None
         self._wall_start = time.perf_counter()
         self.result: MissionResult | None = None
@@ -385,6 +347,7 @@ class FlightSession:
                 self._offboard = True
                 if self.vehicle_start_s is None:
                     self.vehicle_start_s = self._safe.time_s()
+                    self.start_position = self._safe.telemetry().position_ned
                 if self._interrupt is None:
                     self._phase = Phase.HOLDING
             except BaseException as exc:
@@ -447,13 +410,16 @@ class FlightSession:
         loop.on_step = self._step_callback(on_step)
         self._phase = Phase.CENTRING
         wall_start, vehicle_start_s = time.perf_counter(), self._safe.time_s()
-        outcome, message, error = Outcome.ABORTED, "", None
+        outcome, message, error, returned = Outcome.ABORTED, "", None, False
         try:
             if not self._offboard:  # after an operator's hold: back into offboard from a zero setpoint
                 vehicle.set_velocity_body(VelocityBody())
                 vehicle.start_offboard()
                 self._offboard = True
             result = loop.run()
+            if result.outcome is Outcome.TARGET_NOT_FOUND and self._back_to_start(vehicle, config):
+                returned = True
+                result = loop.run()  # the same loop, its records going on: look again from the start
             outcome, message = result.outcome, result.message
             if self._interrupt is None:
                 self._phase = Phase.HOLDING
@@ -468,11 +434,36 @@ class FlightSession:
             judged = judge_instruction(
                 self, index, entry, query, loop.steps, outcome, message, error,
                 wall_s=time.perf_counter() - wall_start, vehicle_s=self.vehicle_end_s - vehicle_start_s,
+                returned_to_start=returned,
             )  # fmt: skip
             self._results.append(judged)
             self.flown_entries.append(entry)
             self.writer.end_instruction(judged.summary())
         return judged
+
+    def _back_to_start(self, vehicle: StoppableVehicle, config: CentringConfig) -> bool:
+        """An instruction's target not in view where the vehicle holds: fly back across the wall to where
+        the flight started (the pose after take-off; its distance from the wall kept), from where the
+        operator's view was set up, to look there (`Mission.return_to_start`). False where it is there
+        already, or the mission says not to."""
+        start = self.start_position
+        if not self.mission.return_to_start or start is None:
+            return False
+        telemetry = self._safe.telemetry()
+        here = telemetry.position_ned
+        _, right_m = world_ned_to_heading(
+            start.north_m - here.north_m, start.east_m - here.east_m, math.radians(telemetry.attitude.yaw_deg)
+        )
+        up_m = here.down_m - start.down_m
+        if max(abs(right_m), abs(up_m)) < config.min_move_m:
+            return False
+        log.info(
+            "the target is not in view here: back to the start (%.2f m right, %.2f m up) to look again",
+            right_m,
+            up_m,
+        )
+        fly_offset(vehicle, right_m, up_m, config.speed_m_s, config.settle_speed_m_s, config.settle_timeout_s)
+        return True
 
     def fly(self, instructions: Sequence[MissionInstruction] | None = None) -> None:
         """The mission's flight: take off, centre each instruction in turn (`instructions`, default the

@@ -3,12 +3,15 @@
     dronectl benchmark-missions --n 200 --seed 1 --json runs/bench_missions.json
     dronectl benchmark-missions --n 20 --seed 1 --vehicle sim-mavlink --planner latent --parallel 2
     dronectl benchmark-missions --n 50 --targets 3 --twins --absent 0.2 --instructions heldout
+    dronectl benchmark-missions --n 100 --seed 1 --targets 3 --planner latent --instructions-per-flight 3
 
 Prints success rate, mean steps, mean steps over the oracle's, final offset, the
 loop's boundary refinement moves, loop overhead and wrong-target centrings (the loop
 stopped on another target, per truth; in-process sim only) per planner, and with
---absent how many absent-target missions ended target_not_found and how many moved;
---json writes the same plus every mission's row.
+--absent how many absent-target missions ended target_not_found and how many moved,
+with --instructions-per-flight N (flights of N instructions, one take-off) how many instructions were
+centred, on the wrong target and not found, by place in the flight; --json writes the same plus every
+mission's row.
 """
 
 from __future__ import annotations
@@ -174,6 +177,13 @@ def main(argv: list[str]) -> int:
         help="fraction of missions whose instruction names a target not in the scene "
         "(they must end target_not_found)",
     )
+    parser.add_argument(
+        "--instructions-per-flight",
+        type=at_least(1),
+        default=1,
+        help="flights of N instructions, one take-off: each names another of the scene's targets "
+        "(needs --targets N or more; default 1)",
+    )
     faults = parser.add_argument_group("injected faults (sim-mavlink and the SITL vehicles; gusts also sim)")
     faults.add_argument(
         "--link-loss", type=float, default=0.0, help="fraction of MAVLink datagrams lost, each way"
@@ -228,7 +238,7 @@ def main(argv: list[str]) -> int:
             base=base_mission(args),
             n=args.n, seed=args.seed, planners=tuple(p.strip() for p in args.planner.split(",") if p.strip()),
             parallel=args.parallel, rerun=args.rerun, ray=args.ray, instructions=args.instructions,
-            absent=args.absent,
+            absent=args.absent, instructions_per_flight=args.instructions_per_flight,
         )  # fmt: skip
     except (Px4FolderError, ArduPilotFolderError) as exc:
         print(f"dronectl benchmark-missions: {exc}", file=sys.stderr)

@@ -6,6 +6,14 @@ with the shipped latent planner checkpoint:
     dronectl fly
     dronectl fly --mission missions/sector_ne.yaml --planner classic --out runs/fly/ne
     dronectl fly --seed 7 --epsilon-px 6
+    dronectl fly --instruction "centre the pressure gauge"
+    dronectl fly --mission missions/regression/three_instructions.yaml   # three targets, one flight
+    dronectl fly --mission FILE --instruction "the gauge" --instruction "the red valve"
+
+Each `--instruction` is centred in turn in one flight (take off once, hold between them, land once); the
+words are understood before takeoff, and one the vocabulary cannot act on is refused in one line naming
+the word and the closest known ones. The options change the mission file's fields and are validated by
+the same mission model (an error names the option's field).
 
 Real PX4 firmware (SITL) flying the simulated world: `--vehicle px4-sitl --px4 DIR`
 (DIR: a PX4 SITL build folder, default $PX4_SITL_DIR); real ArduPilot: `--vehicle ardupilot-sitl`
@@ -43,12 +51,19 @@ from dronectl.options import CommandParser, add_signing_key, at_least, say_error
 DEFAULT_MISSION = Path(__file__).resolve().parents[2] / "missions" / "default.yaml"
 
 
+MISSION_FIELDS = (
+    "planner", "checkpoint", "epsilon_px", "max_steps", "timeout_s", "vehicle", "camera", "sim_speed",
+    "target_kind", "targets",
+)  # fmt: skip
+"""The mission fields an option of the same name changes (`Mission` validates them)."""
+
+
 def _overrides(args: argparse.Namespace) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key in ("planner", "checkpoint", "epsilon_px", "max_steps", "vehicle", "camera", "sim_speed"):
-        value = getattr(args, key)
-        if value is not None:
-            out[key] = value
+    out: dict[str, Any] = {
+        key: getattr(args, key) for key in MISSION_FIELDS if getattr(args, key) is not None
+    }
+    if args.instruction:  # the command line's instructions replace the file's, one or a list
+        out.update(instruction=None, instructions=list(args.instruction))
     return out
 
 
@@ -97,6 +112,8 @@ def summary_lines(result: MissionResult) -> list[str]:
     )
     if result.overhead_ms_mean is not None:
         lines.append(f"      loop overhead: {result.overhead_ms_mean:.1f} ms per step (besides the move)")
+    if len(result.instructions) > 1:
+        lines += [_instruction_line(entry) for entry in result.instructions]
     lines += [f"      - {failure}" for failure in result.failures]
     lines += [f"      not recorded: {error}" for error in result.recording_errors]
     if result.report_dir and result.report_written:
@@ -108,6 +125,17 @@ def summary_lines(result: MissionResult) -> list[str]:
     return lines
 
 
+def _instruction_line(entry: dict[str, Any]) -> str:
+    """One instruction of a flight of several, in a line."""
+    truth = entry["final_truth_offset_px"]
+    where = "" if truth is None else f"; truth ({truth[0]:+.1f}, {truth[1]:+.1f}) px"
+    wrong = "; WRONG TARGET" if entry["wrong_target"] else ""
+    verdict = "pass" if entry["passed"] else "FAIL"
+    outcome = entry["outcome"].replace("_", " ")
+    what = f"{verdict} {entry['instruction']!r}: {outcome} after {entry['steps']} steps"
+    return f"      {entry['index']}. {what}{where}{wrong}"
+
+
 def main(argv: list[str]) -> int:
     parser = CommandParser(prog="dronectl fly", description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -117,7 +145,21 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--checkpoint", help="latent planner checkpoint folder (default: the shipped one)")
     parser.add_argument("--seed", type=seed_value, help="override the scene seed (and a random start's seed)")
     parser.add_argument("--epsilon-px", type=float, help="override ε, pixels")
-    parser.add_argument("--max-steps", type=at_least(1), help="override the step budget")
+    parser.add_argument("--max-steps", type=at_least(1), help="override the step budget (per instruction)")
+    parser.add_argument("--timeout-s", type=float, help="override the time budget (per instruction), seconds")
+    parser.add_argument(
+        "--instruction",
+        action="append",
+        metavar="TEXT",
+        help="what to centre, e.g. 'centre the red valve'; repeat it to centre several in one flight "
+        "(replaces the mission's instructions)",
+    )
+    parser.add_argument(
+        "--target-kind", help="simulated scenes: the named target's kind (gauge, valve, switchbox, ...)"
+    )
+    parser.add_argument(
+        "--targets", type=int, help="simulated scenes: targets on the wall, the named one included (1..4)"
+    )
     parser.add_argument(
         "--vehicle", help="override the vehicle: sim, sim-mavlink, px4-sitl, ardupilot-sitl or a MAVLink URL"
     )

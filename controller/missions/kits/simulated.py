@@ -37,6 +37,9 @@ log = logging.getLogger(__name__)
 
 SIM_IMAGE_PX = 224
 SIM_HFOV_DEG = CameraConfig().hfov_deg  # the simulators' camera: square, so the same vertically
+SETUP_READ_TIMEOUT_S = 10.0
+"""The one truth read a kit needs before takeoff (the ground height) waits this long: at 1 s a benchmark
+mission under a load average of 20 failed to start on it."""
 PX4_MIN_TAKEOFF_ALT_M = 0.5
 """PX4 refuses MIS_TAKEOFF_ALT below 0.5 m: a lower start pose is flown from 0.5 m (a few px off the draw)."""
 
@@ -88,7 +91,9 @@ class SimTruth:
             return None
 
     def ground_height_m(self) -> float:
-        return float(_get_json(self.url)["truth"]["drone"]["position_enu_m"][2])
+        """Read once, before takeoff: given the time a loaded machine may need to answer (the per-step
+        reads keep their short timeout: they must not stall the loop)."""
+        return float(_get_json(self.url, SETUP_READ_TIMEOUT_S)["truth"]["drone"]["position_enu_m"][2])
 
     def frame(self) -> dict[str, Any] | None:
         """The latest frame's whole truth (`sim_world.rendering.video.frame_truth`: the target in pixels,
