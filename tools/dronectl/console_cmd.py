@@ -56,6 +56,14 @@ def _parser() -> CommandParser:
     parser.add_argument("--seed", type=seed_value, help="override the scene seed")
     parser.add_argument("--epsilon-px", type=float, help="override ε, pixels")
     parser.add_argument("--max-steps", type=at_least(1), help="override the step budget per instruction")
+    parser.add_argument("--timeout-s", type=float, help="override the time budget per instruction, seconds")
+    parser.add_argument(
+        "--target-kind", help="simulated scenes: the named target's kind (gauge, valve, switchbox, ...)"
+    )
+    parser.add_argument(
+        "--targets", type=int, help="simulated scenes: targets on the wall, the named one included (1..4)"
+    )
+    parser.set_defaults(instruction=None)  # the console's instructions come from the page, one by one
     parser.add_argument("--sim-speed", help="sim-mavlink: simulated seconds per wall second (default 1)")
     parser.add_argument("--px4", type=Path, help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
     parser.add_argument("--px4-speed", help="px4-sitl: simulated seconds per wall second, or 'max'")
