@@ -1,6 +1,7 @@
 """The console on vehicles other than the in-process simulation: through the sim-vehicle over MAVLink
 (MAVSDK, the MJPEG stream) the page gets frames, Hold reaches HOLD mode in the vehicle's telemetry, a
-video that dies mid-centring shows on the page and holds, a lost link shows on the page;
+video that dies mid-centring shows on the page and holds, a lost link shows on the page, Kill acts in
+the middle of a landing;
 with a real ArduCopter SITL (`--vehicle ardupilot-sitl`, issue 28) the console opens, connects and shows
 the vehicle's state. Browser parts in Debian's headless Chromium; skipped, with the reason, without it
 or without ArduPilot."""
@@ -85,6 +86,14 @@ def test_the_console_through_sim_mavlink_holds_on_the_button_a_lost_video_and_a_
         session.kit.tlog.drop_downlink = False
         _until("link back", lambda: page.text_content("#t-link") == "ok", 30)
         assert session.vehicle.telemetry().flight_mode is not FlightMode.OFFBOARD  # nothing steers it
+        # --- Kill during a landing acts at once, not after it
+        page.click("#btn-land")
+        _until("landing", lambda: session.phase.value == "landing", 10)
+        page.click("#btn-kill")
+        page.click("#btn-kill-confirm")
+        killed_at = time.monotonic()
+        _until("motors stopped", lambda: not session.vehicle.telemetry().armed, 10)
+        assert time.monotonic() - killed_at < 3.0 and session.phase.value == "killed"
     assert [r.outcome.value for r in console.session.results] == ["stopped", "stopped"]
     assert console.session.result is not None  # landed on close, the report finished
 

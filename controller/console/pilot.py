@@ -45,8 +45,10 @@ log = logging.getLogger(__name__)
 
 TELEMETRY_PERIOD_S = 0.2
 WATCH_PERIOD_S = 0.25
-VIDEO_LOST_S = 1.0
-"""No frame for this long: the video is lost (the page says so, a running operation holds)."""
+VIDEO_LOST_S = 2.0
+"""No frame for this long: the video is lost (the page says so, a running operation holds). Two seconds:
+a loaded machine's stream stalls for a second now and then (seen at a load average of 22 on 2 cores),
+and the loop itself gives up on a camera only after its frame timeout (5 s)."""
 JOIN_TIMEOUT_S = 10.0
 GROUNDED = (Phase.ON_GROUND, Phase.LANDED, Phase.KILLED)
 """The session's phases in which Hold and Land have nothing to do."""
@@ -176,6 +178,7 @@ class Pilot:
             "vehicle": self.vehicle_name,
             "epsilon_px": self.session.epsilon_px,
             "actions": list(ACTION_NAMES),
+            "video_lost_s": VIDEO_LOST_S,
         }
 
     def report_dir(self) -> Path:

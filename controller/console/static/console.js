@@ -6,7 +6,6 @@
 const $ = (id) => document.getElementById(id);
 const canvas = $("video");
 const ctx = canvas.getContext("2d");
-const VIDEO_LOST_MS = 1500;
 const STALE_FRAMES = 6;
 const FRAME_DRAWN = '{"type":"frame_drawn"}';
 
@@ -282,7 +281,8 @@ function draw() {
 
 setInterval(() => {
   const s = window.consoleStats;
-  const stale = s.lastFrameMs === null || nowMs() - s.lastFrameMs > VIDEO_LOST_MS;
+  const lostMs = state.hello ? state.hello.video_lost_s * 1000 : 2000;  // the server's threshold
+  const stale = s.lastFrameMs === null || nowMs() - s.lastFrameMs > lostMs;
   if (stale && state.header) $("video-lost").hidden = false;
   const recent = s.latencyMs.slice(-30);
   const mean = recent.length ? recent.reduce((a, b) => a + b, 0) / recent.length : null;
