@@ -50,6 +50,8 @@ VIDEO_LOST_S = 2.0
 a loaded machine's stream stalls for a second now and then (seen at a load average of 22 on 2 cores),
 and the loop itself gives up on a camera only after its frame timeout (5 s)."""
 JOIN_TIMEOUT_S = 10.0
+UNWIND_WAIT_S = 3.0
+"""How long an instruction waits for an operation that a Hold has stopped to finish unwinding."""
 GROUNDED = (Phase.ON_GROUND, Phase.LANDED, Phase.KILLED)
 """The session's phases in which Hold and Land have nothing to do."""
 
@@ -197,6 +199,10 @@ class Pilot:
             return refused
         if not self._flying():
             return f"the vehicle is {self.session.phase.value.replace('_', ' ')}: press Take off first"
+        with self._lock:
+            operation = self._operation
+        if operation is not None and self.session.phase is Phase.HOLDING:
+            operation.join(UNWIND_WAIT_S)  # one a Hold stopped is still unwinding: the next may follow it
         return self._start("centring", text, lambda: self._centre(text, query))
 
     def command(self, name: str, sent_ms: float | None = None) -> str | None:

@@ -43,6 +43,8 @@ log = logging.getLogger(__name__)
 MAX_MESSAGE_BYTES = 4096
 """The largest message a page may send (an instruction is a line of text)."""
 START_TIMEOUT_S = 10.0
+MAX_CONNECTIONS = 64
+"""Open connections (pages, requests) at once; more are answered 503 (a flood cannot exhaust the server)."""
 FRAME_DRAWN = '{"type":"frame_drawn"}'
 """What the page sends after drawing each frame, exactly (`FrameDrawnMessage`)."""
 STATIC_FILES = {"console.js": "text/javascript", "console.css": "text/css"}
@@ -276,7 +278,7 @@ class ConsoleServer:
         self.host = host
         config = uvicorn.Config(
             app, host=host, port=port, log_level="warning", ws_max_size=MAX_MESSAGE_BYTES * 4,
-            lifespan="off", access_log=False,
+            lifespan="off", access_log=False, limit_concurrency=MAX_CONNECTIONS,
         )  # fmt: skip
         self._server = uvicorn.Server(config)
         self._thread = threading.Thread(target=self._run, name="console-server", daemon=True)
