@@ -139,7 +139,7 @@ def _fly_until_airborne(out: Path) -> tuple[subprocess.Popen[str], dict]:
                 data = json.loads(report.read_text())
             except ValueError:
                 data = {}
-            if data.get("steps"):
+            if any(entry["records"] for entry in data.get("instructions", [])):
                 return process, data
         assert process.poll() is None, process.communicate()[0]
         time.sleep(0.2)

@@ -69,7 +69,7 @@ def test_a_site_glossary_adds_words_for_parser_and_planner_at_once(tmp_path: Pat
     )
     mission = load_mission(mission_file)
     assert understand("frame the pressure transmitter", mission.vocabulary) == TargetQuery("gauge")
-    query = understand(mission.instruction or "", mission.vocabulary)
+    query = understand(mission.instructions[0].instruction, mission.vocabulary)
     assert planner_instruction(query, mission.vocabulary) == "center the switch box"
     with pytest.raises(InstructionRefused):
         understand("frame the pressure transmitter")  # without the glossary: an unknown word

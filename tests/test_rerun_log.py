@@ -98,7 +98,7 @@ def test_an_existing_recording_is_refused_before_anything_flies(tmp_path: Path) 
         run_mission(parse_mission(MISSION), tmp_path / "report", media=False, rerun_path=rrd)
     assert rrd.read_bytes() == b"earlier flight"
     report = json.loads((tmp_path / "report" / "report.json").read_text())
-    assert "never overwritten" in report["error"] and not report.get("steps")
+    assert "never overwritten" in report["error"] and report["instructions"] == []
     with pytest.raises(RerunFileError, match=r"\.rrd"):
         check_rerun_path(tmp_path / "flight.txt")
     with pytest.raises(RerunFileError, match="does not exist"):

@@ -47,7 +47,7 @@ def _until_first_step(process: subprocess.Popen[str], out: Path) -> dict:
             report = json.loads((out / "report.json").read_text())
         except (OSError, ValueError):
             report = {}
-        if report.get("steps"):
+        if any(entry["records"] for entry in report.get("instructions", [])):
             return report
         assert process.poll() is None, process.communicate()[0]
         time.sleep(0.1)

@@ -601,7 +601,7 @@ class FlightSession:
             text = f"interrupted ({how}); a vehicle in the air was held, then landed"
         else:
             text = f"{type(exc).__name__}: {exc}"
-        if text not in self._errors:
+        if not any(error.startswith(text) for error in self._errors):  # (`_abort` may have added to it)
             self._errors.append(text)
         return text
 

@@ -171,6 +171,7 @@ def simulated_mavlink_kit(mission: Mission, models: LoadedModels | None, sim: Si
         mission, [(t.kind, colour_name(t.bezel_colour)) for t in sampled.targets]
     )
     truth = TruthFollower(sim.truth.targets)  # judging only: the current instruction's target
+    climb_m = sim.takeoff_climb_m()  # the simulator's truth read first, before the models load
     return FlightKit.judged_by(
         truth,
         vehicle=sim.opened.vehicle,
@@ -180,7 +181,7 @@ def simulated_mavlink_kit(mission: Mission, models: LoadedModels | None, sim: Si
         instruction=instruction,
         target=query,
         truth_extremes=sim.truth.extremes,
-        takeoff_altitude_m=sim.takeoff_climb_m(),
+        takeoff_altitude_m=climb_m,
         info={
             "scene_seed": mission.scene.seed,
             "target_kind": sampled.target.kind,
