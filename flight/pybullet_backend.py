@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -36,6 +38,11 @@ _MODES = {
 }
 
 
+PACED_CHUNK_STEPS = 4
+"""A paced clock steps this many physics steps at a time (1/60 s at 240 Hz) between its waits."""
+PACE_SLACK_S = 0.25
+
+
 class PyBulletVehicle(Vehicle):
     """Flies `world` in simulated time. Owns the world (and closes it) only when built by `create()`."""
 
@@ -49,6 +56,9 @@ class PyBulletVehicle(Vehicle):
         owns_world: bool = False,
     ) -> None:
         self.world = world
+        self._pace: float | None = None  # simulated seconds per wall second; None: as fast as it goes
+        self._pace_origin = (0.0, 0.0)  # (simulated, wall) time when the pace was last set or lost
+        self._step_lock = threading.Lock()
         self.timeouts = timeouts or FlightTimeouts()
         self.altitude_tolerance_m = altitude_tolerance_m
         self._owns_world = owns_world
@@ -75,7 +85,40 @@ class PyBulletVehicle(Vehicle):
         a deadline always gets there.
         """
         steps = math.ceil(max(0.0, seconds) / self.world.dt_s - 1e-9)
-        self.world.step(steps)
+        if self._pace is None:
+            self.world.step(steps)
+            return
+        end_s = self.time_s() + (steps - 1e-6) * self.world.dt_s
+        while self.time_s() < end_s:
+            with self._step_lock:  # several threads may sleep at once: the clock still keeps its pace
+                chunk = min(PACED_CHUNK_STEPS, math.ceil((end_s - self.time_s()) / self.world.dt_s))
+                if chunk <= 0:
+                    return
+                self._wait_for_pace()
+                self.world.step(chunk)
+
+    def set_pace(self, speed: float | None) -> None:
+        """Run the simulated clock at most `speed` simulated seconds per wall second (1.0: real time, for
+        a person watching; None: as fast as the CPU goes, the default). Safe to call from any thread;
+        `sleep()` may then be called from several threads at once (each returns when the clock has
+        passed its own end), which lets a live view keep the world moving between a client's calls."""
+        if speed is not None and not (math.isfinite(speed) and speed > 0):
+            raise ValueError(f"pace must be a number > 0 or None, got {speed!r}")
+        with self._step_lock:
+            self._pace = speed
+            self._pace_origin = (self.time_s(), time.monotonic())
+
+    def _wait_for_pace(self) -> None:
+        """Wait (holding the step lock) until the wall clock has caught up with the simulated one; a
+        clock that fell behind by more than `PACE_SLACK_S` (a loaded machine) starts again from now
+        rather than racing to catch up."""
+        assert self._pace is not None
+        sim0, wall0 = self._pace_origin
+        ahead_s = (self.time_s() - sim0) / self._pace - (time.monotonic() - wall0)
+        if ahead_s > 0:
+            time.sleep(ahead_s)
+        elif ahead_s < -PACE_SLACK_S:
+            self._pace_origin = (self.time_s(), time.monotonic())
 
     def _step_until(
         self, predicate: Callable[[Telemetry], bool], timeout_s: float, origin: str, what: str

@@ -66,6 +66,12 @@ class SafeVehicle(Vehicle):
             self.last_command = command
             self._last_command_time_s = self.inner.time_s()
 
+    def setpoint_age_s(self) -> float | None:
+        """Seconds (vehicle clock) since the last velocity setpoint reached the backend, while in offboard
+        (where the watchdog counts it); None outside offboard."""
+        with self._lock:
+            return self.inner.time_s() - self._last_command_time_s if self._offboard else None
+
     def watchdog_tick(self) -> bool:
         """Command zero velocity if the controller went silent in offboard; True when it did."""
         with self._lock:

@@ -23,6 +23,15 @@ class Detector(Protocol):
     def detect(self, image: np.ndarray) -> Detection | None: ...
 
 
+def detect_all(detector: Detector, image: np.ndarray) -> tuple[Detection, ...]:
+    """Every detection, strongest first: `detect_all` where the detector has it, else `detect`'s one."""
+    every = getattr(detector, "detect_all", None)
+    if callable(every):
+        return tuple(every(image))
+    detection = detector.detect(image)
+    return () if detection is None else (detection,)
+
+
 class TruthWorld(Protocol):
     """What the truth detector needs of `sim_world.World`."""
 

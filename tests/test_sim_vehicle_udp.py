@@ -21,7 +21,7 @@ from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.params import ParameterStore, encode_param_value
 from sim_world.vehicle.server import SimVehicle
-from sim_world.vehicle.telemetry import HomePoint
+from sim_world.vehicle.telemetry import HEARTBEAT_HZ, HomePoint
 from sim_world.vehicle.world_model import WorldVehicleModel
 from sim_world.world import World, WorldConfig
 
@@ -97,7 +97,7 @@ def test_heartbeat_identity_mode_encoding_and_telemetry():
         assert glob.relative_alt == pytest.approx(0, abs=50)
         assert client.wait_for("HOME_POSITION", 3.0, after=0.0).latitude == round(home.latitude_deg * 1e7)
         assert client.wait_for("BATTERY_STATUS", 2.0).battery_remaining > 90
-        assert 0.5 <= client.rate_hz("HEARTBEAT", 2.0) <= 1.5
+        assert 0.7 * HEARTBEAT_HZ <= client.rate_hz("HEARTBEAT", 2.0) <= 1.3 * HEARTBEAT_HZ
 
         assert client.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION) == [ACCEPTED]
         version = client.wait_for("AUTOPILOT_VERSION", 1.0, after=0.0)

@@ -39,6 +39,7 @@ in the report and stops, never the flight.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
@@ -493,13 +494,16 @@ class FlightSession:
         self._interrupt_with("land", self._land_now)
 
     def kill(self) -> None:
-        """Stop whatever runs and stop the motors at once (forced disarm): a flying vehicle falls."""
-        self._interrupt_with("kill", self._kill_now)
+        """Stop whatever runs and stop the motors at once (forced disarm): a flying vehicle falls. Never
+        behind another interrupt: a Kill pressed during a landing acts at once (on a real-time vehicle)."""
+        self._interrupt_with("kill", self._kill_now, wait_for_interrupts=False)
 
-    def _interrupt_with(self, name: str, action: Callable[[], None]) -> None:
+    def _interrupt_with(
+        self, name: str, action: Callable[[], None], wait_for_interrupts: bool = True
+    ) -> None:
         if self._closed:
             raise SessionError(f"{name}: the session is closed")
-        with self._interrupt_lock:
+        with self._interrupt_lock if wait_for_interrupts else contextlib.nullcontext():
             self._interrupt = name
             self._stop.set()
             if self._op_lock.acquire(blocking=False):  # nothing runs: act here
@@ -542,9 +546,12 @@ class FlightSession:
             self._safe.land()
             self._safe.disarm()
         except Exception as exc:  # the landing itself failed: the safe stop's best effort, then say it
+            if self._phase is Phase.KILLED:  # a Kill under the landing ended it: nothing left to land
+                return
             self._abort(exc)
             raise
-        self._phase = Phase.LANDED
+        if self._phase is not Phase.KILLED:
+            self._phase = Phase.LANDED
 
     def _kill_now(self) -> None:
         if self._phase is Phase.KILLED:

@@ -110,7 +110,7 @@ from drone_inspect_core.centring import default_stop_margin_px, is_centred, offs
 from flight.moves import MoveResult, fly_offset
 from flight.vehicle import Deadline, Vehicle
 from perception.camera import Camera
-from perception.detector import Detector
+from perception.detector import Detector, detect_all
 from perception.errors import CameraFrozenError
 from perception.types import Detection, Frame
 
@@ -376,7 +376,7 @@ class CentringLoop:
         vehicle_time_s = self.vehicle.time_s()
         truth = self.truth_probe() if self.truth_probe is not None else None
         t1 = time.perf_counter()
-        detections = self._detect_all(frame.image)
+        detections = detect_all(self.detector, frame.image)
         detection = select_target(detections, self.target)
         t2 = time.perf_counter()
         offset = offset_px(detection, frame.width, frame.height) if detection is not None else None
@@ -400,14 +400,6 @@ class CentringLoop:
         if query.kind is None and detection is not None and detection.kind is not None:
             query = TargetQuery(detection.kind, query.attribute)
         return planner_instruction(query, self.config.vocabulary)
-
-    def _detect_all(self, image: np.ndarray) -> tuple[Detection, ...]:
-        """Every detection, strongest first: `detect_all` where the detector has it, else `detect`'s one."""
-        detect_all = getattr(self.detector, "detect_all", None)
-        if callable(detect_all):
-            return tuple(detect_all(image))
-        detection = self.detector.detect(image)
-        return () if detection is None else (detection,)
 
     def stop_threshold_px(self, width: int) -> float:
         """ε minus the stopping margin for images `width` px wide; ValueError when that leaves nothing."""

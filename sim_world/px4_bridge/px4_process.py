@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from sim_world.sitl.children import SitlChild, find_sitl_dir
+from sim_world.vehicle.telemetry import HEARTBEAT_HZ
 
 log = logging.getLogger(__name__)
 
@@ -235,5 +236,6 @@ def _mavlink_script(ports: Px4Ports) -> str:
         "#!/bin/sh",
         _OUR_HOOK.format("px4-rc.mavlink"),
         f"mavlink start -x -u {local} -r 4000000 -f -m onboard -o {remote}",
+        f"mavlink stream -u {local} -s HEARTBEAT -r {HEARTBEAT_HZ:g}",  # PX4's 1 Hz: modes a second late
     ]
     return "\n".join(lines) + "\n"

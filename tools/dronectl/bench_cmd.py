@@ -30,6 +30,10 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     ),
     "fuzz": ("dronectl.bench_fuzz", "hostile MAVLink against flying missions: crashes, commands obeyed"),
     "disk-full": ("dronectl.bench_disk_full", "the disk fills mid-flight: landed by the controller?"),
+    "console": (
+        "dronectl.bench_console",
+        "the console in a browser: page fps, camera-to-page latency, Hold to HOLD mode",
+    ),
     "concurrent": (
         "dronectl.bench_concurrent",
         "several `fly` at once with defaults: own vehicle, own folder",

@@ -52,6 +52,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("dronectl.evaluate_cmd", "evaluate a trained planner checkpoint on a dataset"),
     "reproduce": ("dronectl.reproduce_cmd", "run the paper's experiments and write a report"),
     "fly": ("dronectl.fly_cmd", "fly one centring mission and write a report"),
+    "console": ("dronectl.console_cmd", "the operator's live console in the browser"),
     "missions": ("dronectl.missions_cmd", "run a mission suite: `missions run DIR`"),
     "benchmark-missions": ("dronectl.benchmark_missions_cmd", "randomised missions, planners side by side"),
     "gym-eval": ("dronectl.gym_eval_cmd", "policies in the Gymnasium environment DroneInspect/Centring-v0"),
