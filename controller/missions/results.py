@@ -40,6 +40,8 @@ class MissionResult:
     """Boundary refinement moves the loop flew after the planner chose "no move" (see planning.loop)."""
     second_choice_moves: int = 0
     """Moves flown on the planner's best-ranked move after it chose "no move" far from centre."""
+    not_in_view_reads: int = 0
+    """Frames on which the detector saw the named target and the planner said it was not in view."""
     info: dict[str, Any] = field(default_factory=dict)
     vehicle_clock_s: dict[str, float] = field(default_factory=dict)
     """Milestones (connected, ready, offboard) on the vehicle's clock (PX4 SITL: its simulated time)."""

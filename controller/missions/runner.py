@@ -44,6 +44,7 @@ from controller.planning.loop_records import (
     CentringConfig,
     Outcome,
     StepRecord,
+    count_not_in_view,
     count_refinements,
     count_second_choices,
 )
@@ -249,6 +250,7 @@ def _finish(
         "moves": sum(1 for s in steps if s.move is not None),
         "refinement_moves": count_refinements(steps),
         "second_choice_moves": count_second_choices(steps),
+        "not_in_view_reads": count_not_in_view(steps),
         "stop_threshold_px": steps[-1].stop_threshold_px if steps else None,
         "final_offset_px": {"truth": final_truth, "detector": final_detector},
         "wrong_target": wrong is not None,
@@ -283,6 +285,7 @@ def _finish(
         info=kit.info,
         refinement_moves=summary["refinement_moves"],
         second_choice_moves=summary["second_choice_moves"],
+        not_in_view_reads=summary["not_in_view_reads"],
         vehicle_clock_s=summary["vehicle_clock_s"],
         files=final["files"],
         truth_extremes=summary["truth_extremes"],

@@ -31,7 +31,7 @@ class Outcome(str, Enum):
     MAX_STEPS = "max_steps"
     TIMEOUT = "timeout"
     TARGET_LOST = "target_lost"
-    TARGET_NOT_FOUND = "target_not_found"  # the named target was never seen in this run
+    TARGET_NOT_FOUND = "target_not_found"  # the named target was never found in this run
     PLANNER_STALLED = "planner_stalled"
     ABORTED = "aborted"  # an exception or Ctrl-C ended the flight (set by the caller)
     ERROR = "error"  # the mission could not start (set by the caller)
@@ -155,6 +155,8 @@ class StepEvent(str, Enum):
     CENTRED = "centred"
     LOST = "lost"
     NOT_FOUND = "not_found"
+    NOT_IN_VIEW = "not_in_view"
+    """The detector saw the named kind and colour; the planner said the asked-for target is not in view."""
     RECOVERY = "recovery"
     REFINEMENT = "refinement"
     SECOND_CHOICE = "second_choice"
@@ -200,6 +202,7 @@ class StepRecord:
     event: StepEvent = StepEvent.MOVE
     stop_threshold_px: float | None = None  # ε − the stopping margin: what `centred` was tested against
     detections: tuple[Detection, ...] = ()  # everything the detector saw, strongest first
+    presence: float | None = None  # the planner's p(asked-for target in view) on this frame, where asked
     timing: StepTiming = field(default_factory=lambda: StepTiming(0.0, 0.0, 0.0, 0.0, 0.0))
 
 
@@ -228,6 +231,11 @@ class CentringResult:
 def count_second_choices(steps: list[StepRecord]) -> int:
     """How many moves `steps` flew on the planner's second choice (after a "no move" far from centre)."""
     return sum(1 for s in steps if s.event is StepEvent.SECOND_CHOICE)
+
+
+def count_not_in_view(steps: list[StepRecord]) -> int:
+    """Frames on which the detector saw the named target and the planner said it was not in view."""
+    return sum(1 for s in steps if s.event is StepEvent.NOT_IN_VIEW)
 
 
 def count_refinements(steps: list[StepRecord]) -> int:
