@@ -14,7 +14,7 @@ from controller.planning.actions import ALL_ACTIONS, label_from_offset
 from controller.planning.grounding import TargetQuery
 from controller.planning.loop import CentringConfig, CentringLoop, Outcome
 from controller.planning.planners import ClassicPlanner, Observation, Plan
-from perception.types import Detection
+from perception.types import Detection, Frame
 
 EPSILON = 10.0
 
@@ -194,3 +194,50 @@ def test_a_planner_that_does_not_judge_presence_is_not_asked_before_the_first_mo
     result, _ = run("centre the red valve", [GAUGE, RED_VALVE], planner=script)
     assert result.outcome is Outcome.CENTRED
     assert script.calls == sum(1 for s in result.steps if s.action is not None)  # one call a decision
+
+
+class TargetsCamera(FakeCamera):
+    """Grey frames with each target drawn as a white square where `FakeMultiTargetDetector` sees it."""
+
+    def __init__(self, detector: FakeMultiTargetDetector) -> None:
+        super().__init__()
+        self.detector = detector
+
+    def read(self, timeout_s: float | None = None) -> Frame:
+        frame = super().read(timeout_s)
+        image = frame.image + np.uint8(90)
+        for d in FakeMultiTargetDetector(self.detector.vehicle, self.detector.targets).detect_all(image):
+            u0, v0, u1, v1 = (round(x) for x in d.bbox_px)
+            image[max(0, v0 + 3) : v1 - 3, max(0, u0 + 3) : u1 - 3] = 255
+        return Frame(image, frame.timestamp_s, frame.frame_number)
+
+
+class SeeingPlanner(FakePresencePlanner):
+    """Keeps every picture it was shown."""
+
+    def __init__(self) -> None:
+        super().__init__(in_view={"gauge", "valve"})
+        self.pictures: list[np.ndarray] = []
+
+    def plan(self, seen: Observation) -> Plan:
+        self.pictures.append(seen.image)
+        return super().plan(seen)
+
+
+@pytest.mark.parametrize("paint", [True, False])
+def test_the_planner_sees_the_other_twin_painted_over_and_the_record_keeps_the_frame(paint: bool) -> None:
+    vehicle = FakeVehicle.at_pose()
+    detector = FakeMultiTargetDetector(vehicle, [GAUGE, RED_VALVE, YELLOW_VALVE])
+    planner = SeeingPlanner()
+    config = CentringConfig(epsilon_px=EPSILON, instruction="centre the red valve", paint_over_twins=paint)
+    result = CentringLoop(vehicle, TargetsCamera(detector), detector, planner, config).run()
+    assert result.outcome is Outcome.CENTRED
+    first = result.steps[0]
+    yellow = next(d for d in first.detections if d.attribute == "yellow")
+    u, v = (int(c) for c in yellow.centre_px)
+    red_u, red_v = (int(c) for c in first.detection.centre_px)
+    gauge_u, gauge_v = (int(c) for c in next(d for d in first.detections if d.kind == "gauge").centre_px)
+    seen = planner.pictures[0]
+    assert first.frame.image[v, u].tolist() == [255, 255, 255]  # the record: the camera's frame
+    assert seen[v, u].tolist() == ([90, 90, 90] if paint else [255, 255, 255])  # the other valve: wall
+    assert seen[red_v, red_u].tolist() == seen[gauge_v, gauge_u].tolist() == [255, 255, 255]  # the rest kept

@@ -82,6 +82,11 @@ verdict is asked for until the target is found, not after: once found, the targe
 follows is the one both agreed on, and a presence read at every later step would add a chance of
 a false "not in view" to every step of every centring.
 
+Twins: two targets of one kind differ only in a thin trim band, which the detector reads and the
+planner reads poorly. The planner is shown the frame with the other detections of the chosen
+detection's kind painted over (`paint_over_twins`, on by default; `perception.masking`), so it
+plans towards the one the loop tests ε on; the frame recorded is the camera's.
+
 Every step is recorded (`StepRecord`: frame, detection, action, the planner's 9
 distances, pose, timing) and handed to `on_step` as it happens, so a caller can
 persist it before the next step; an exception leaves `loop.steps` holding every
@@ -125,6 +130,7 @@ from flight.vehicle import Deadline, Vehicle
 from perception.camera import Camera
 from perception.detector import Detector
 from perception.errors import CameraFrozenError
+from perception.masking import paint_over
 from perception.types import Detection, Frame
 
 log = logging.getLogger(__name__)
@@ -253,7 +259,7 @@ class CentringLoop:
         """Ask the planner about `record`'s frame for `query` (default: the named target), timed."""
         t_plan = time.perf_counter()
         observation = Observation(
-            record.frame.image,
+            self._planner_picture(record),
             record.detection,
             self._planner_words(record.detection, query),
             self.config.epsilon_px,
@@ -263,6 +269,15 @@ class CentringLoop:
         plan = self.planner.plan(observation)
         record.timing = replace(record.timing, plan_s=record.timing.plan_s + time.perf_counter() - t_plan)
         return plan
+
+    def _planner_picture(self, record: StepRecord) -> np.ndarray:
+        """The frame the planner sees: with the other detections of the chosen one's kind painted over
+        (`paint_over_twins`; see the module docstring), else the frame itself."""
+        chosen = record.detection
+        if not self.config.paint_over_twins or chosen is None:
+            return record.frame.image
+        twins = [d.bbox_px for d in record.detections if d is not chosen and d.kind == chosen.kind]
+        return paint_over(record.frame.image, twins)
 
     def _confirm(self, record: StepRecord, state: _RunState) -> Plan | None:
         """The named target detected before it was found in this run: found unless the planner says its

@@ -66,6 +66,9 @@ class LoopSettings(BaseModel):
     max_second_choices: int = Field(default=4, ge=0, le=20)
     """Moves per run flown on the planner's best-ranked move after it chose "no move" far from centre
     (0: never; such a choice is then a stall; see the module docstring of planning.loop)."""
+    paint_over_twins: bool = True
+    """Show the planner the frame with the other detections of the named target's kind painted over
+    (`perception.masking`): the detector's colour reading, not the planner's, tells twins apart."""
     scale_moves: bool = True
     """Scale each move with the detector's pixel offset (True) or the paper's fixed lengths (False)."""
     max_move_m: float = Field(default=1.0, gt=0.0, le=3.0)
