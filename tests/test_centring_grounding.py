@@ -178,6 +178,16 @@ def test_a_detection_the_planner_says_is_not_in_view_is_never_flown_towards() ->
     assert planner.heard == ["center the switch box"] * 3
 
 
+def test_without_confirm_with_planner_the_detector_alone_decides() -> None:
+    phantom = WallTarget("switchbox", "grey", 0.5, 0.0, 0.6)
+    planner = FakePresencePlanner(in_view={"gauge", "valve"})
+    result, vehicle = run(
+        "centre the switch box", [GAUGE, phantom], planner=planner, confirm_with_planner=False
+    )
+    assert result.outcome is Outcome.CENTRED and vehicle.east_m > 0.4  # flew to what the detector saw
+    assert all(s.event != "not_in_view" for s in result.steps)
+
+
 def test_the_planner_is_asked_by_kind_and_a_target_it_confirms_is_centred() -> None:
     planner = FakePresencePlanner(in_view={"gauge", "valve"})
     result, vehicle = run("centre the red valve", [GAUGE, RED_VALVE, YELLOW_VALVE], planner=planner)

@@ -75,9 +75,9 @@ colour is the target found only if the planner, asked on that frame whether that
 (`grounding.presence_query`: the kind alone; its presence head tells kinds apart but not twins'
 colours, which the detector reads), does not say no (`Plan.in_view`: the latent planner's p(in
 view) against its checkpoint's calibrated `presence_threshold`). A planner that gives no verdict
-(`judges_presence` False or absent) is not asked and leaves it to the detector. A frame where the
-detector sees a match but the planner says "not in view" is a not-found read (event
-"not_in_view", p(in view) recorded): the loop holds, never moving towards that detection. The
+(`judges_presence` False or absent), or `confirm_with_planner` False, leaves it to the detector.
+A frame where the detector sees a match but the planner says "not in view" is a not-found read
+(event "not_in_view", p(in view) recorded): the loop holds, never moving towards that detection. The
 verdict is asked for until the target is found, not after: once found, the target the loop
 follows is the one both agreed on, and a presence read at every later step would add a chance of
 a false "not in view" to every step of every centring.
@@ -283,7 +283,7 @@ class CentringLoop:
         """The named target detected before it was found in this run: found unless the planner says its
         kind is not in view (`grounding.presence_query`; the read is then a not-found one, event
         "not_in_view"). Returns the plan where it was asked in the named target's own words."""
-        if not getattr(self.planner, "judges_presence", False):  # the detector alone decides, as ever
+        if not (self.config.confirm_with_planner and getattr(self.planner, "judges_presence", False)):
             state.seen_target = True
             return None
         asked = presence_query(self.target, record.detection)

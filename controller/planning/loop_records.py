@@ -66,6 +66,9 @@ class LoopSettings(BaseModel):
     max_second_choices: int = Field(default=4, ge=0, le=20)
     """Moves per run flown on the planner's best-ranked move after it chose "no move" far from centre
     (0: never; such a choice is then a stall; see the module docstring of planning.loop)."""
+    confirm_with_planner: bool = True
+    """Take a detection for the named target only if a planner that judges presence (a calibrated latent
+    checkpoint) does not say its kind is out of view; False: the detector alone decides."""
     paint_over_twins: bool = True
     """Show the planner the frame with the other detections of the named target's kind painted over
     (`perception.masking`): the detector's colour reading, not the planner's, tells twins apart."""
