@@ -217,28 +217,39 @@ class ImageDetector:
         found = sorted(
             ((float(heat[kind, j, i]), kind, j, i) for kind, j, i in peaks.nonzero().tolist()), reverse=True
         )
-        kept: list[Detection] = []
+        kept: list[tuple[Detection, tuple[float, float, float, float]]] = []
         for score, kind, j, i in found:
-            det = self._detection_at(out, kind, j, i, score, width, height)
+            det, whole = self._detection_and_box(out, kind, j, i, score, width, height)
             u, v = det.centre_px
-            if any(o.bbox_px[0] <= u <= o.bbox_px[2] and o.bbox_px[1] <= v <= o.bbox_px[3] for o in kept):
+            if any(o.bbox_px[0] <= u <= o.bbox_px[2] and o.bbox_px[1] <= v <= o.bbox_px[3] for o, _ in kept):
                 continue  # the same object, seen again as another kind or a side peak
-            kept.append(det)
-        return [replace(d, attribute=read_attribute(image, d.bbox_px, d.kind)) for d in kept]
+            kept.append((det, whole))
+        # The colour is read around the whole box: a target cut by the frame's edge keeps its rim where it
+        # is (its clipped box would put the rim inside the target, on its face).
+        return [replace(d, attribute=read_attribute(image, whole, d.kind)) for d, whole in kept]
 
     def _detection_at(
         self, out: torch.Tensor, kind: int, j: int, i: int, score: float, width: int, height: int
     ) -> Detection:
         """The detection of heatmap cell (j, i) of channel `kind`, in the frame's pixels."""
+        return self._detection_and_box(out, kind, j, i, score, width, height)[0]
+
+    def _detection_and_box(
+        self, out: torch.Tensor, kind: int, j: int, i: int, score: float, width: int, height: int
+    ) -> tuple[Detection, tuple[float, float, float, float]]:
+        """`_detection_at`, and its box as predicted, not clipped to the frame (it may reach past it)."""
         k = len(self.config.kinds)
         sx, sy = width / self.config.input_size, height / self.config.input_size
         u = (i + float(out[k, j, i])) * STRIDE * sx
         v = (j + float(out[k + 1, j, i])) * STRIDE * sy
         left, top, right, bottom = (torch.exp(out[k + 2 : k + 6, j, i]) * EDGE_SCALE_PX).tolist()
+        whole = (u - left * sx, v - top * sy, u + right * sx, v + bottom * sy)
         bbox = (
-            max(0.0, u - left * sx),
-            max(0.0, v - top * sy),
-            min(float(width), u + right * sx),
-            min(float(height), v + bottom * sy),
+            max(0.0, whole[0]),
+            max(0.0, whole[1]),
+            min(float(width), whole[2]),
+            min(float(height), whole[3]),
         )
-        return Detection(bbox_px=bbox, centre_px=(u, v), confidence=score, kind=self.config.kinds[kind])
+        return Detection(
+            bbox_px=bbox, centre_px=(u, v), confidence=score, kind=self.config.kinds[kind]
+        ), whole

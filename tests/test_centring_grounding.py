@@ -11,8 +11,8 @@ from controller.missions.schema import Expectations
 from controller.planning.actions import ALL_ACTIONS, label_from_offset
 from controller.planning.grounding import TargetQuery
 from controller.planning.loop import CentringConfig, CentringLoop, Outcome
-from controller.planning.planners import ClassicPlanner, Observation
-from perception.types import Detection
+from controller.planning.planners import ClassicPlanner, Observation, Plan
+from perception.types import Detection, Frame
 
 EPSILON = 10.0
 
@@ -98,3 +98,113 @@ def test_classic_planner_steers_to_the_named_detection_and_falls_back_to_the_str
 
 def test_mission_expectations_accept_target_not_found() -> None:
     assert Expectations(outcome="target_not_found").outcome == Outcome.TARGET_NOT_FOUND.value
+
+
+class FakePresencePlanner:
+    """Steers towards the loop's detection (as the classic planner would) and says, as the latent planner
+    with a calibrated presence head does, whether the kind it is asked about is in view: the kinds in
+    `in_view`, whatever the detector reads. Keeps every instruction it heard."""
+
+    name = "fake-presence"
+    judges_presence = True
+
+    def __init__(self, in_view: set[str]) -> None:
+        self.in_view = in_view
+        self.heard: list[str] = []
+
+    def plan(self, seen: Observation) -> Plan:
+        self.heard.append(seen.instruction)
+        seen_kind = next((k for k in sorted(self.in_view) if k in seen.instruction.replace(" ", "")), None)
+        p = 0.99 if seen_kind is not None else 0.02
+        if seen.offset_px is None:
+            return Plan(ALL_ACTIONS[4], None, p, p >= 0.5)
+        du, dv = seen.offset_px
+        return Plan(label_from_offset(du, dv, seen.stop_threshold_px), None, p, p >= 0.5)
+
+
+def test_a_detection_the_planner_says_is_not_in_view_is_never_flown_towards() -> None:
+    # The detector reads a switch box where the planner sees none: the loop holds, re-reads, gives up.
+    phantom = WallTarget("switchbox", "grey", 0.5, 0.0, 0.6)
+    planner = FakePresencePlanner(in_view={"gauge", "valve"})
+    result, vehicle = run("centre the switch box", [GAUGE, phantom], planner=planner, not_found_rereads=2)
+    assert result.outcome is Outcome.TARGET_NOT_FOUND
+    assert vehicle.moves_commanded == 0 and result.moves == 0 and (vehicle.east_m, vehicle.up_m) == (0.0, 0.0)
+    assert [s.event for s in result.steps] == ["not_in_view"] * 3
+    assert all(s.detection is not None and s.action is None and s.presence == 0.02 for s in result.steps)
+    assert "the planner says no switchbox is in view" in result.message
+    assert planner.heard == ["center the switch box"] * 3
+
+
+def test_without_confirm_with_planner_the_detector_alone_decides() -> None:
+    phantom = WallTarget("switchbox", "grey", 0.5, 0.0, 0.6)
+    planner = FakePresencePlanner(in_view={"gauge", "valve"})
+    result, vehicle = run(
+        "centre the switch box", [GAUGE, phantom], planner=planner, confirm_with_planner=False
+    )
+    assert result.outcome is Outcome.CENTRED and vehicle.east_m > 0.4  # flew to what the detector saw
+    assert all(s.event != "not_in_view" for s in result.steps)
+
+
+def test_the_planner_is_asked_by_kind_and_a_target_it_confirms_is_centred() -> None:
+    planner = FakePresencePlanner(in_view={"gauge", "valve"})
+    result, vehicle = run("centre the red valve", [GAUGE, RED_VALVE, YELLOW_VALVE], planner=planner)
+    assert result.outcome is Outcome.CENTRED
+    assert vehicle.east_m == pytest.approx(0.6, abs=EPSILON / PX_PER_M)
+    # First the kind alone (its colour is the detector's reading), then the named target's own words.
+    assert planner.heard[:2] == ["center the valve", "center the red valve"]
+    assert set(planner.heard[2:]) == {"center the red valve"}  # found once: never asked about presence again
+    assert result.steps[0].presence == 0.99 and all(s.presence is None for s in result.steps[1:])
+
+
+def test_a_planner_that_does_not_judge_presence_is_not_asked_before_the_first_move() -> None:
+    script = FakePlanner([ALL_ACTIONS.index(label_from_offset(58.0, -19.0, 8.0))] * 20)
+    result, _ = run("centre the red valve", [GAUGE, RED_VALVE], planner=script)
+    assert result.outcome is Outcome.CENTRED
+    assert script.calls == sum(1 for s in result.steps if s.action is not None)  # one call a decision
+
+
+class TargetsCamera(FakeCamera):
+    """Grey frames with each target drawn as a white square where `FakeMultiTargetDetector` sees it."""
+
+    def __init__(self, detector: FakeMultiTargetDetector) -> None:
+        super().__init__()
+        self.detector = detector
+
+    def read(self, timeout_s: float | None = None) -> Frame:
+        frame = super().read(timeout_s)
+        image = frame.image + np.uint8(90)
+        for d in FakeMultiTargetDetector(self.detector.vehicle, self.detector.targets).detect_all(image):
+            u0, v0, u1, v1 = (round(x) for x in d.bbox_px)
+            image[max(0, v0 + 3) : v1 - 3, max(0, u0 + 3) : u1 - 3] = 255
+        return Frame(image, frame.timestamp_s, frame.frame_number)
+
+
+class SeeingPlanner(FakePresencePlanner):
+    """Keeps every picture it was shown."""
+
+    def __init__(self) -> None:
+        super().__init__(in_view={"gauge", "valve"})
+        self.pictures: list[np.ndarray] = []
+
+    def plan(self, seen: Observation) -> Plan:
+        self.pictures.append(seen.image)
+        return super().plan(seen)
+
+
+@pytest.mark.parametrize("paint", [True, False])
+def test_the_planner_sees_the_other_twin_painted_over_and_the_record_keeps_the_frame(paint: bool) -> None:
+    vehicle = FakeVehicle.at_pose()
+    detector = FakeMultiTargetDetector(vehicle, [GAUGE, RED_VALVE, YELLOW_VALVE])
+    planner = SeeingPlanner()
+    config = CentringConfig(epsilon_px=EPSILON, instruction="centre the red valve", paint_over_twins=paint)
+    result = CentringLoop(vehicle, TargetsCamera(detector), detector, planner, config).run()
+    assert result.outcome is Outcome.CENTRED
+    first = result.steps[0]
+    yellow = next(d for d in first.detections if d.attribute == "yellow")
+    u, v = (int(c) for c in yellow.centre_px)
+    red_u, red_v = (int(c) for c in first.detection.centre_px)
+    gauge_u, gauge_v = (int(c) for c in next(d for d in first.detections if d.kind == "gauge").centre_px)
+    seen = planner.pictures[0]
+    assert first.frame.image[v, u].tolist() == [255, 255, 255]  # the record: the camera's frame
+    assert seen[v, u].tolist() == ([90, 90, 90] if paint else [255, 255, 255])  # the other valve: wall
+    assert seen[red_v, red_u].tolist() == seen[gauge_v, gauge_u].tolist() == [255, 255, 255]  # the rest kept

@@ -8,7 +8,14 @@ import torch
 from safetensors import safe_open
 from safetensors.torch import load_file, save_file
 
-from controller.planning.latent.checkpoint import CONFIG_FILE, WEIGHTS_FILE, load_checkpoint, save_checkpoint
+from controller.planning.latent.checkpoint import (
+    CONFIG_FILE,
+    WEIGHTS_FILE,
+    PlannerSettings,
+    load_checkpoint,
+    save_checkpoint,
+    write_planner_settings,
+)
 from controller.planning.latent.config import ModelConfig
 from controller.planning.latent.errors import PlannerCheckpointError
 from controller.planning.latent.model import LatentDynamicsModel
@@ -116,4 +123,22 @@ def test_vocabulary_mismatch_is_named(ckpt_dir: Path) -> None:
     with (ckpt_dir / VOCAB_FILE).open("a") as f:
         f.write("extratoken\n")
     with pytest.raises(PlannerCheckpointError, match=f"{VOCAB_FILE} has .* tokens"):
+        load_checkpoint(ckpt_dir)
+
+
+def test_planner_settings_are_written_alone_and_checked_on_load(ckpt_dir: Path) -> None:
+    before = json.loads((ckpt_dir / CONFIG_FILE).read_text())
+    write_planner_settings(ckpt_dir, PlannerSettings(mirror_tta=True, presence_threshold=0.9))
+    after = json.loads((ckpt_dir / CONFIG_FILE).read_text())
+    assert after.pop("planner") == {"mirror_tta": True, "presence_threshold": 0.9}
+    assert after == before  # every other field as it was
+    loaded = load_checkpoint(ckpt_dir)  # the weights' probe still holds
+    assert loaded.planner.presence_threshold == 0.9 and loaded.planner.mirror_tta
+    (ckpt_dir / CONFIG_FILE).write_text(json.dumps({**before, "planner": {"presence_threshold": 1.5}}))
+    with pytest.raises(
+        PlannerCheckpointError, match=r"config.json: invalid 'planner' section: presence_threshold"
+    ):
+        load_checkpoint(ckpt_dir)
+    (ckpt_dir / CONFIG_FILE).write_text(json.dumps({**before, "planner": {"presence_treshold": 0.5}}))
+    with pytest.raises(PlannerCheckpointError, match="presence_treshold"):  # a misspelt key is not ignored
         load_checkpoint(ckpt_dir)

@@ -117,3 +117,20 @@ def test_decoding_keeps_each_local_peak_once_and_drops_another_kind_on_the_same_
     assert found[1].centre_px == pytest.approx((180.0, 160.0))
     single = detector.detect(np.full((224, 224, 3), 128, np.uint8))
     assert single is not None and single.centre_px == found[0].centre_px
+
+
+def test_a_target_cut_by_the_frame_edge_has_its_colour_read_around_its_whole_box(
+    detector: ImageDetector, renders: dict[int, tuple[np.ndarray, str, str]]
+) -> None:
+    # Each scene's centred target moved to 12 px from the left edge (most of them cut by it).
+    right = right_if_clipped = 0
+    for rgb, kind, colour in renders.values():
+        image = np.ascontiguousarray(
+            np.concatenate([rgb[:, 100:], np.repeat(rgb[:, -1:], 100, axis=1)], axis=1)
+        )
+        found = [d for d in detector.detect_all(image) if d.kind == kind]
+        assert found  # seen: its centre is in the frame
+        right += found[0].attribute == colour
+        right_if_clipped += read_attribute(image, found[0].bbox_px, kind) == colour
+    # Measured 14 of 16 around the whole box, 4 of 16 around the clipped one (its rim on the target's face).
+    assert right >= len(renders) - 3 and right > right_if_clipped + 5, (right, right_if_clipped)

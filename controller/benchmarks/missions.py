@@ -10,7 +10,9 @@ boundary refinement moves (flown when the planner chose "no move" just outside
 the stop threshold: total, and missions that needed one), and the loop's overhead
 per step (everything but the move). Several targets: wrong-target centrings (the
 loop stopped, but per truth on another target; never a success) in their own
-column. Absent-target missions count apart: ended `target_not_found` / flew a move.
+column. Absent-target missions count apart: ended `target_not_found` / flew a move. Where the
+planner says whether the target is in view (a calibrated latent checkpoint), the missions in which it
+said "not in view" of a detection of the named target, present and absent ones apart.
 """
 
 from __future__ import annotations
@@ -163,6 +165,11 @@ def summarise(config: BenchmarkConfig, results: list[MissionResult], wall_s: flo
             "second_choice_moves": sum(r.second_choice_moves for r in rows.values()),
             "missions_with_second_choice": sum(r.second_choice_moves > 0 for r in rows.values()),
             "wrong_target": sum(r.wrong_target for r in rows.values()),
+            "not_in_view": {  # the planner said "not in view" of a detection of the named target
+                "present_missions": sum(r.not_in_view_reads > 0 for r in rows.values()),
+                "absent_missions": sum(r.not_in_view_reads > 0 for r in absent),
+                "reads": sum(r.not_in_view_reads for r in every.values()),
+            },
             "absent": {
                 "missions": len(absent),
                 "not_found": sum(r.outcome == "target_not_found" for r in absent),
@@ -311,10 +318,12 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"{cfg['instructions_per_flight']} instructions per flight (one take-off), each on its own target"
         )
     any_absent = any(p.get("absent", {}).get("missions") for p in summary["planners"].values())
+    any_vetoes = any(p.get("not_in_view", {}).get("reads") for p in summary["planners"].values())
     lines.append(
         f"{'planner':<8} {'success':>15} {'mean steps':>10} {'/oracle':>8} {'offset px mean/p95/max':>23} "
         f"{'refinement moves':>16} {'second choices':>14} {'overhead ms':>11} {'wrong target':>12}"
         + (f" {'absent: not found/wandered':>26}" if any_absent else "")
+        + (f" {'planner: not in view (present/absent missions)':>47}" if any_vetoes else "")
     )
     for name, p in summary["planners"].items():
         refinements = f"{p['refinement_moves']} in {p['missions_with_refinement']}"
@@ -326,7 +335,9 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"{name:<8} {p['successes']:>5}/{p['missions']:<4} {100 * p['success_rate']:>5.1f}% "
             f"{num(p['mean_steps'], '.2f'):>10} {num(p['mean_steps_over_oracle'], '.2f'):>8} {offsets:>23} "
             f"{refinements:>16} {seconds:>14} {num(p['overhead_ms_mean'], '.1f'):>11} "
-            f"{p.get('wrong_target', 0):>12}" + (f" {_absent_cell(p['absent']):>26}" if any_absent else "")
+            f"{p.get('wrong_target', 0):>12}"
+            + (f" {_absent_cell(p['absent']):>26}" if any_absent else "")
+            + (f" {_not_in_view_cell(p['not_in_view']):>47}" if any_vetoes else "")
         )
     for name, p in summary["planners"].items():
         if "per_instruction" in p:
@@ -350,3 +361,8 @@ def _per_instruction_line(planner: str, counts: dict[str, Any]) -> str:
 def _absent_cell(absent: dict[str, int]) -> str:
     """ "4/5, 1 moved": absent-target missions that ended target_not_found, and those that flew a move."""
     return f"{absent['not_found']}/{absent['missions']}, {absent['wandered']} moved"
+
+
+def _not_in_view_cell(counts: dict[str, int]) -> str:
+    """ "0/3": present and absent missions in which the planner said a detected target was not in view."""
+    return f"{counts['present_missions']}/{counts['absent_missions']}"

@@ -33,12 +33,13 @@ from controller.evaluation.operator_words import (
 )
 from controller.evaluation.presence import (
     Ask,
+    flown_asker,
     judge_presence,
+    kind_presence_pairs,
     presence_pairs,
     presence_threshold,
 )
 from controller.planning.actions import NUM_ACTIONS, with_mirror
-from controller.planning.grounding import TargetQuery, planner_instruction
 from controller.planning.latent.checkpoint import LoadedCheckpoint, load_checkpoint
 from controller.planning.latent.errors import InstructionError
 from controller.planning.latent.model import LatentDynamicsModel
@@ -69,6 +70,9 @@ class EvalResult:
     """Rank-1 by the named target's kind and how many targets the image shows ("gauge/2"): {"n", "rank1"}."""
     presence: dict[str, float | int] | None = None
     """`presence.PresenceResult.summary()` for a checkpoint with a presence head."""
+    presence_by_kind: dict[str, float | int] | None = None
+    """The same, asked as the loop asks before it takes a detection for the target: by the kind alone
+    (`presence.kind_presence_pairs`)."""
     correct: list[bool] = field(default_factory=list)
     """Per image: the right action, from an instruction the loop understood (as flown)."""
     parsed: dict[str, int] | None = None
@@ -88,6 +92,8 @@ class EvalResult:
         out = {k: getattr(self, k) for k in keys}
         if self.presence is not None:
             out["presence"] = self.presence
+        if self.presence_by_kind is not None:
+            out["presence_by_kind"] = self.presence_by_kind
         if self.parsed is not None:
             out["parsed"] = self.parsed
         return out
@@ -250,11 +256,6 @@ def asker(ckpt: LoadedCheckpoint, setting: str) -> Ask:
     return lambda name, rng: describe(name, templates, corpus, rng)
 
 
-def flown_asker(name: TargetQuery, rng: np.random.Generator) -> str:
-    """What the planner hears in flight for a target asked for as `name`, whatever the words."""
-    return planner_instruction(name)
-
-
 def evaluate_loaded(
     ckpt: LoadedCheckpoint,
     data: ImageSet,
@@ -325,6 +326,13 @@ def evaluate_checkpoint_modes(
     if flown:
         reading = as_flown(instructions, data.targets)
         readings.append((f"{setting} as flown", reading.heard, flown_asker, reading))
+    threshold = presence_threshold(ckpt.planner)
+    by_kind: dict[bool, dict[str, float | int]] = {}
+    if ckpt.model.presence is not None and data.targets:
+        for mirror in mirror_modes:  # the words do not depend on the reading: once per mirror mode
+            by_kind[mirror] = judge_presence(
+                *kind_presence_pairs(ckpt, data, empty, mirror), threshold
+            ).summary()
     results = []
     for name, texts, ask, reading in readings:
         dist = predict_distances(ckpt.model, ckpt.tokenizer, ckpt.goal_image_embedding, data.images, texts)
@@ -339,7 +347,8 @@ def evaluate_checkpoint_modes(
             result.parsed = None if reading is None else reading.counts()
             if ckpt.model.presence is not None and data.targets:
                 pairs = presence_pairs(ckpt, data, texts, empty, ask, seed, mirror)
-                result.presence = judge_presence(*pairs, presence_threshold(ckpt.meta)).summary()
+                result.presence = judge_presence(*pairs, threshold).summary()
+                result.presence_by_kind = by_kind[mirror]
             log.info("%s on %s/%s (%d images, %s): rank-1 %.4f", model_dir, data_dir, split, result.n,
                      result.instructions, result.rank1)  # fmt: skip
             results.append(result)

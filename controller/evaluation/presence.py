@@ -8,9 +8,16 @@ on pairs whose truth is known from the manifest:
   targets has, or a kind with a colour none of that kind has), and each `empty` image (no
   target in view) asked for its scene's named target.
 
+As the loop asks (`kind_presence_pairs`): before it takes a detection for the target it asks the
+planner whether that kind is in view (`grounding.presence_query`), so these pairs ask by the kind
+alone: present, each test image for its named target's kind; absent, each test image for every kind
+none of its targets has, and each `empty` image for its named target's kind. The calibrated
+threshold is chosen on such pairs of validation scenes (`presence_calibration`).
+
 Reported: the area under the ROC curve (the chance that an absent pair scores lower than a
 present one), and at the checkpoint's threshold (its config.json `planner.presence_threshold`,
-chosen on validation scenes by `choose_threshold`; 0.5 where it has none) the accuracy, the
+chosen on validation scenes by `dronectl calibrate-presence`: `presence_calibration`; 0.5 where it
+has none) the accuracy, the
 share of present pairs called absent (a mission that would give up on a target in view) and of
 absent pairs called present.
 """
@@ -23,10 +30,11 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
-from controller.planning.grounding import TargetQuery
-from controller.planning.latent.checkpoint import LoadedCheckpoint
+from controller.planning.grounding import TargetQuery, planner_instruction, presence_query
+from controller.planning.latent.checkpoint import LoadedCheckpoint, PlannerSettings
 from controller.training.data import ImageSet, to_float
 from controller.training.pairs import absent_names, named_target_name
+from drone_inspect_core.vocabulary import shipped_vocabulary
 
 DEFAULT_THRESHOLD = 0.5
 """p(in view) below which a checkpoint without a calibrated threshold calls the target absent."""
@@ -52,6 +60,11 @@ class PresenceResult:
 
 Ask = Callable[[TargetQuery, np.random.Generator], str]
 """How an evaluation asks for a target in words: a name and a seeded generator → an instruction."""
+
+
+def flown_asker(name: TargetQuery, rng: np.random.Generator) -> str:
+    """What the planner hears in flight for a target asked for as `name`, whatever the words."""
+    return planner_instruction(name)
 
 
 @torch.inference_mode()
@@ -112,11 +125,40 @@ def presence_pairs(
     return p_present, np.concatenate(absent)
 
 
-def presence_threshold(meta: dict) -> float:
+def kind_presence_pairs(
+    ckpt: LoadedCheckpoint, data: ImageSet, empty: ImageSet | None, mirror: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """p(in view) asked as the loop asks before it takes a detection for the target
+    (`grounding.presence_query`: by the kind alone, in the planner's words), for the present pairs (each
+    image of `data` asked for its named target's kind) and the absent ones (each image asked for every
+    kind none of its targets has; each `empty` image for its named target's kind). No draw: every pair."""
+
+    def words(kind: str) -> str:
+        return planner_instruction(presence_query(TargetQuery(kind)))
+
+    p_present = presence_probabilities(
+        ckpt, data.images, [words(refs[0].kind) for refs in data.targets], mirror=mirror
+    )
+    index, texts = [], []
+    for i, refs in enumerate(data.targets):
+        have = {t.kind for t in refs}
+        missing = [k for k in shipped_vocabulary().kind_names if k not in have]
+        index += [i] * len(missing)
+        texts += [words(k) for k in missing]
+    absent = [presence_probabilities(ckpt, data.images[index], texts, mirror=mirror)] if texts else []
+    if empty is not None and len(empty):
+        absent.append(
+            presence_probabilities(
+                ckpt, empty.images, [words(refs[0].kind) for refs in empty.targets], mirror=mirror
+            )
+        )
+    return p_present, np.concatenate(absent) if absent else np.zeros(0)
+
+
+def presence_threshold(settings: PlannerSettings) -> float:
     """The checkpoint's calibrated presence threshold (config.json `planner.presence_threshold`), else 0.5."""
-    planner = meta.get("planner") if isinstance(meta.get("planner"), dict) else {}
-    value = planner.get("presence_threshold")
-    return DEFAULT_THRESHOLD if value is None else float(value)
+    value = settings.presence_threshold
+    return DEFAULT_THRESHOLD if value is None else value
 
 
 def auroc(scores_pos: np.ndarray, scores_neg: np.ndarray) -> float:

@@ -23,7 +23,13 @@ from controller.missions.results import (
 from controller.missions.schema import MissionInstruction
 from controller.missions.truth import named_indices, named_offset
 from controller.planning.grounding import TargetQuery
-from controller.planning.loop_records import Outcome, StepRecord, count_refinements, count_second_choices
+from controller.planning.loop_records import (
+    Outcome,
+    StepRecord,
+    count_not_in_view,
+    count_refinements,
+    count_second_choices,
+)
 
 if TYPE_CHECKING:
     from controller.missions.session import FlightSession
@@ -82,6 +88,7 @@ def judge_instruction(
         wall_s=round(wall_s, 3),
         error=error,
         returned_to_start=returned_to_start,
+        not_in_view_reads=count_not_in_view(steps),
         records=tuple(steps),
     )
 
@@ -137,6 +144,7 @@ def finish_flight(session: FlightSession) -> MissionResult:
         "moves": sum(r.moves for r in results),
         "refinement_moves": sum(r.refinement_moves for r in results),
         "second_choice_moves": sum(r.second_choice_moves for r in results),
+        "not_in_view_reads": sum(r.not_in_view_reads for r in results),
         "final_offset_px": {
             "truth": None if last is None else last.final_truth_offset_px,
             "detector": None if last is None else last.final_detector_offset_px,
@@ -171,6 +179,7 @@ def finish_flight(session: FlightSession) -> MissionResult:
         info=kit.info,
         refinement_moves=summary["refinement_moves"],
         second_choice_moves=summary["second_choice_moves"],
+        not_in_view_reads=summary["not_in_view_reads"],
         vehicle_clock_s=summary["vehicle_clock_s"],
         files=final["files"],
         truth_extremes=summary["truth_extremes"],

@@ -79,6 +79,7 @@ def step_to_json(step: StepRecord) -> dict[str, Any]:
         "stop_threshold_px": None if step.stop_threshold_px is None else round(step.stop_threshold_px, 3),
         "action": None if step.action is None else step.action.name,
         "distances": None if step.distances is None else [round(float(d), 6) for d in step.distances],
+        "presence": None if step.presence is None else round(float(step.presence), 4),
         "pose": {
             "north_m": round(t.position_ned.north_m, 4),
             "east_m": round(t.position_ned.east_m, 4),

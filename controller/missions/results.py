@@ -41,6 +41,8 @@ class MissionResult:
     """Boundary refinement moves the loop flew after the planner chose "no move" (see planning.loop)."""
     second_choice_moves: int = 0
     """Moves flown on the planner's best-ranked move after it chose "no move" far from centre."""
+    not_in_view_reads: int = 0
+    """Frames on which the detector saw the named target and the planner said it was not in view."""
     info: dict[str, Any] = field(default_factory=dict)
     vehicle_clock_s: dict[str, float] = field(default_factory=dict)
     """Milestones (connected, ready, offboard) on the vehicle's clock (PX4 SITL: its simulated time)."""
@@ -172,6 +174,8 @@ class InstructionResult:
     error: str | None = None
     returned_to_start: bool = False
     """Its target was not in view where the vehicle held, and it flew back to the start to look again."""
+    not_in_view_reads: int = 0
+    """Frames on which the detector saw the named target and the planner said it was not in view."""
     records: tuple[StepRecord, ...] = field(default=(), repr=False, compare=False)
     """The loop's step records (frames included): for a caller's own use; not in `summary()`."""
 

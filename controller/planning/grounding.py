@@ -179,6 +179,15 @@ def planner_instruction(query: TargetQuery, vocabulary: Vocabulary | None = None
     return f"center the {query.attribute + ' ' if query.attribute else ''}{noun}"
 
 
+def presence_query(query: TargetQuery, detection: Detection | None = None) -> TargetQuery:
+    """What the loop asks the planner's presence head before it takes a detection for the target: the
+    kind alone (an unnamed kind: the detection's). The head tells kinds apart (AUROC 0.98 on validation
+    scenes) but not twins' trim colours (0.65; docs/targets.md), which the detector's colour reading
+    judges instead."""
+    kind = query.kind if query.kind is not None else (detection.kind if detection is not None else None)
+    return TargetQuery(kind, None)
+
+
 def select_target(detections: Iterable[Detection], query: TargetQuery) -> Detection | None:
     """The strongest detection that `query` matches; None when none does."""
     fitting = [d for d in detections if query.matches(d)]

@@ -66,9 +66,26 @@ The named target: the detector reports every target it sees (`detect_all`; a det
 with only `detect` gives its one detection); the loop keeps the strongest one that the
 instruction names (`CentringConfig.target`, else `parse_instruction(instruction)`;
 `controller.planning.grounding`) and tests ε on it alone. Until the named target has
-been seen once in a run, no detection of it is "not found", not "lost": the loop holds
+been found once in a run, no detection of it is "not found", not "lost": the loop holds
 and re-reads up to `not_found_rereads` frames, never moving, then stops with
 `target_not_found` and a message naming what was asked for and what was seen.
+
+Found takes the detector and, where it says, the planner: a detection of the named kind and
+colour is the target found only if the planner, asked on that frame whether that kind is in view
+(`grounding.presence_query`: the kind alone; its presence head tells kinds apart but not twins'
+colours, which the detector reads), does not say no (`Plan.in_view`: the latent planner's p(in
+view) against its checkpoint's calibrated `presence_threshold`). A planner that gives no verdict
+(`judges_presence` False or absent), or `confirm_with_planner` False, leaves it to the detector.
+A frame where the detector sees a match but the planner says "not in view" is a not-found read
+(event "not_in_view", p(in view) recorded): the loop holds, never moving towards that detection. The
+verdict is asked for until the target is found, not after: once found, the target the loop
+follows is the one both agreed on, and a presence read at every later step would add a chance of
+a false "not in view" to every step of every centring.
+
+Twins: two targets of one kind differ only in a thin trim band, which the detector reads and the
+planner reads poorly. The planner is shown the frame with the other detections of the chosen
+detection's kind painted over (`paint_over_twins`, on by default; `perception.masking`), so it
+plans towards the one the loop tests ε on; the frame recorded is the camera's.
 
 Every step is recorded (`StepRecord`: frame, detection, action, the planner's 9
 distances, pose, timing) and handed to `on_step` as it happens, so a caller can
@@ -93,6 +110,7 @@ from controller.planning.grounding import (
     describe_seen,
     parse_instruction,
     planner_instruction,
+    presence_query,
     select_target,
 )
 from controller.planning.loop_records import (
@@ -112,6 +130,7 @@ from flight.vehicle import Deadline, Vehicle
 from perception.camera import Camera
 from perception.detector import Detector, detect_all
 from perception.errors import CameraFrozenError
+from perception.masking import paint_over
 from perception.types import Detection, Frame
 
 log = logging.getLogger(__name__)
@@ -185,7 +204,7 @@ class _RunState:
     refinements: int = 0
     second_choices: int = 0
     rereads: int = 0
-    seen_target: bool = False  # the named target was detected at least once in this run
+    seen_target: bool = False  # the named target was found (detected, the planner not against) in this run
     recoveries: int = 0
     last_move: tuple[Action, tuple[float, float]] | None = None
     before_move: np.ndarray | None = None  # the picture the last move was planned on
@@ -212,8 +231,9 @@ class CentringLoop:
             t0 = time.perf_counter()
             record = self._observe_fresh(len(self.steps), state)
             outcome: Outcome | None = None
-            state.seen_target = state.seen_target or record.detection is not None
-            if record.detection is None and not state.seen_target:
+            unconfirmed = record.detection is not None and not state.seen_target
+            plan = self._confirm(record, state) if unconfirmed else None
+            if not state.seen_target:
                 outcome = self._on_not_found(record, state)
             elif record.detection is None:
                 outcome = self._on_lost(record, state)
@@ -224,7 +244,7 @@ class CentringLoop:
             elif self.vehicle.time_s() - state.start_s > cfg.timeout_s:
                 record.event, outcome = StepEvent.TIMEOUT, Outcome.TIMEOUT
             else:
-                outcome = self._decide_and_move(record, state)
+                outcome = self._decide_and_move(record, state, plan)
             read_s, detect_s, plan_s = record.timing.read_s, record.timing.detect_s, record.timing.plan_s
             move_s = record.move.wall_time_s if record.move is not None else 0.0
             record.timing = StepTiming(read_s, detect_s, plan_s, move_s, time.perf_counter() - t0)
@@ -235,21 +255,58 @@ class CentringLoop:
                 log.info("centring loop: %s", message)
                 return CentringResult(outcome, self.steps, message)
 
-    def _decide_and_move(self, record: StepRecord, state: _RunState) -> Outcome | None:
-        """The target is seen and not centred: ask the planner, fly its action."""
-        cfg = self.config
-        state.rereads = 0
+    def _plan(self, record: StepRecord, query: TargetQuery | None = None) -> Plan:
+        """Ask the planner about `record`'s frame for `query` (default: the named target), timed."""
         t_plan = time.perf_counter()
         observation = Observation(
-            record.frame.image,
+            self._planner_picture(record),
             record.detection,
-            self._planner_words(record.detection),
-            cfg.epsilon_px,
+            self._planner_words(record.detection, query),
+            self.config.epsilon_px,
             record.stop_threshold_px,
             record.detections,
         )
         plan = self.planner.plan(observation)
-        record.timing = replace(record.timing, plan_s=time.perf_counter() - t_plan)
+        record.timing = replace(record.timing, plan_s=record.timing.plan_s + time.perf_counter() - t_plan)
+        return plan
+
+    def _planner_picture(self, record: StepRecord) -> np.ndarray:
+        """The frame the planner sees: with the other detections of the chosen one's kind painted over
+        (`paint_over_twins`; see the module docstring), else the frame itself."""
+        chosen = record.detection
+        if not self.config.paint_over_twins or chosen is None:
+            return record.frame.image
+        twins = [d.bbox_px for d in record.detections if d is not chosen and d.kind == chosen.kind]
+        return paint_over(record.frame.image, twins)
+
+    def _confirm(self, record: StepRecord, state: _RunState) -> Plan | None:
+        """The named target detected before it was found in this run: found unless the planner says its
+        kind is not in view (`grounding.presence_query`; the read is then a not-found one, event
+        "not_in_view"). Returns the plan where it was asked in the named target's own words."""
+        if not (self.config.confirm_with_planner and getattr(self.planner, "judges_presence", False)):
+            state.seen_target = True
+            return None
+        asked = presence_query(self.target, record.detection)
+        plan = self._plan(record, asked)
+        record.presence = plan.presence
+        if plan.in_view is False:
+            record.event = StepEvent.NOT_IN_VIEW
+        else:
+            state.seen_target = True
+        return (
+            plan
+            if self._planner_words(record.detection, asked) == self._planner_words(record.detection)
+            else None
+        )
+
+    def _decide_and_move(
+        self, record: StepRecord, state: _RunState, plan: Plan | None = None
+    ) -> Outcome | None:
+        """The target is seen and not centred: ask the planner (unless it was asked on this frame), fly
+        its action."""
+        cfg = self.config
+        state.rereads = 0
+        plan = plan if plan is not None else self._plan(record)
         state.decisions += 1
         record.action, record.distances = plan.action, plan.distances
         refine = self._refinement(record, state, plan.action)
@@ -312,9 +369,11 @@ class CentringLoop:
         return refinement_signs(self.config.epsilon_px, record.stop_threshold_px, record.offset_px, action)
 
     def _on_not_found(self, record: StepRecord, state: _RunState) -> Outcome | None:
-        """The named target not seen yet in this run: hold and re-read (bounded), never move."""
+        """The named target not found yet in this run (not detected, or detected where the planner says
+        it is not in view): hold and re-read (bounded), never move."""
         self.vehicle.hold()
-        record.event = StepEvent.NOT_FOUND
+        if record.event is not StepEvent.NOT_IN_VIEW:
+            record.event = StepEvent.NOT_FOUND
         if state.rereads < self.config.not_found_rereads:
             state.rereads += 1
             self.vehicle.sleep(self.config.settle_s)
@@ -393,10 +452,11 @@ class CentringLoop:
         """What the loop centres: the configured query, else the instruction's reading."""
         return self.config.target or parse_instruction(self.config.instruction, self.config.vocabulary)
 
-    def _planner_words(self, detection: Detection | None) -> str:
-        """What the planner hears: the target the loop tests ε on, in the words the planner trained on
-        (`grounding.planner_instruction`); an unnamed kind is the kind of the detection it centres."""
-        query = self.target
+    def _planner_words(self, detection: Detection | None, query: TargetQuery | None = None) -> str:
+        """What the planner hears: the target the loop tests ε on (or `query`), in the words the planner
+        trained on (`grounding.planner_instruction`); an unnamed kind is the kind of the detection it
+        centres."""
+        query = query or self.target
         if query.kind is None and detection is not None and detection.kind is not None:
             query = TargetQuery(detection.kind, query.attribute)
         return planner_instruction(query, self.config.vocabulary)
@@ -438,6 +498,14 @@ class CentringLoop:
 
     def _message(self, outcome: Outcome, decisions: int, last: StepRecord) -> str:
         cfg = self.config
+        if outcome is Outcome.TARGET_NOT_FOUND and last.event is StepEvent.NOT_IN_VIEW:
+            asked = presence_query(self.target, last.detection).describe()
+            return (
+                f"no {self.target.describe()} in view: the detector saw "
+                f"{describe_seen((last.detection,) if last.detection else ())}, but the planner says no "
+                f"{asked} is in view (p(in view) {last.presence or 0.0:.3f}, below its threshold); saw: "
+                f"{describe_seen(last.detections)}"
+            )
         if outcome is Outcome.TARGET_NOT_FOUND:
             return f"no {self.target.describe()} in view; saw: {describe_seen(last.detections)}"
         return {

@@ -31,7 +31,7 @@ class Outcome(str, Enum):
     MAX_STEPS = "max_steps"
     TIMEOUT = "timeout"
     TARGET_LOST = "target_lost"
-    TARGET_NOT_FOUND = "target_not_found"  # the named target was never seen in this run
+    TARGET_NOT_FOUND = "target_not_found"  # the named target was never found in this run
     PLANNER_STALLED = "planner_stalled"
     ABORTED = "aborted"  # an exception or Ctrl-C ended the flight (set by the caller)
     STOPPED = "stopped"  # the operator stopped it (Hold, Land, Kill) and the vehicle held (set by the caller)
@@ -67,6 +67,12 @@ class LoopSettings(BaseModel):
     max_second_choices: int = Field(default=4, ge=0, le=20)
     """Moves per run flown on the planner's best-ranked move after it chose "no move" far from centre
     (0: never; such a choice is then a stall; see the module docstring of planning.loop)."""
+    confirm_with_planner: bool = True
+    """Take a detection for the named target only if a planner that judges presence (a calibrated latent
+    checkpoint) does not say its kind is out of view; False: the detector alone decides."""
+    paint_over_twins: bool = True
+    """Show the planner the frame with the other detections of the named target's kind painted over
+    (`perception.masking`): the detector's colour reading, not the planner's, tells twins apart."""
     scale_moves: bool = True
     """Scale each move with the detector's pixel offset (True) or the paper's fixed lengths (False)."""
     max_move_m: float = Field(default=1.0, gt=0.0, le=3.0)
@@ -156,6 +162,8 @@ class StepEvent(str, Enum):
     CENTRED = "centred"
     LOST = "lost"
     NOT_FOUND = "not_found"
+    NOT_IN_VIEW = "not_in_view"
+    """The detector saw the named kind and colour; the planner said the asked-for target is not in view."""
     RECOVERY = "recovery"
     REFINEMENT = "refinement"
     SECOND_CHOICE = "second_choice"
@@ -201,6 +209,7 @@ class StepRecord:
     event: StepEvent = StepEvent.MOVE
     stop_threshold_px: float | None = None  # ε − the stopping margin: what `centred` was tested against
     detections: tuple[Detection, ...] = ()  # everything the detector saw, strongest first
+    presence: float | None = None  # the planner's p(asked-for target in view) on this frame, where asked
     timing: StepTiming = field(default_factory=lambda: StepTiming(0.0, 0.0, 0.0, 0.0, 0.0))
 
 
@@ -229,6 +238,11 @@ class CentringResult:
 def count_second_choices(steps: list[StepRecord]) -> int:
     """How many moves `steps` flew on the planner's second choice (after a "no move" far from centre)."""
     return sum(1 for s in steps if s.event is StepEvent.SECOND_CHOICE)
+
+
+def count_not_in_view(steps: list[StepRecord]) -> int:
+    """Frames on which the detector saw the named target and the planner said it was not in view."""
+    return sum(1 for s in steps if s.event is StepEvent.NOT_IN_VIEW)
 
 
 def count_refinements(steps: list[StepRecord]) -> int:

@@ -64,10 +64,16 @@ class Observation:
 
 @dataclass(frozen=True)
 class Plan:
-    """A planner's choice and, for a planner that scores actions, its 9 scores (lower is better)."""
+    """A planner's choice and, for a planner that scores actions, its 9 scores (lower is better); for
+    one that says how sure it is that the asked-for target is in view, that too."""
 
     action: Action
     distances: tuple[float, ...] | None = None
+    presence: float | None = None
+    """p(the asked-for target in view), where the planner gives one (recorded; `in_view` is the verdict)."""
+    in_view: bool | None = None
+    """The planner's verdict on `presence` at its calibrated threshold: False, the asked-for target is
+    not in view (the loop then moves towards no detection); None, the planner does not say."""
 
     def __post_init__(self) -> None:
         if self.distances is not None and len(self.distances) != len(ALL_ACTIONS):
@@ -77,7 +83,8 @@ class Plan:
 
 
 class Planner(Protocol):
-    """Picks the next action; `name` identifies it in reports."""
+    """Picks the next action; `name` identifies it in reports. A planner whose plans say whether the
+    asked-for target is in view (`Plan.in_view`) also has `judges_presence = True`."""
 
     name: str
 
@@ -88,7 +95,8 @@ class LatentPlannerAdapter:
     """The latent dynamics planner (`controller.planning.latent`) on the `Planner` interface.
 
     The model scores every action by the distance from the predicted next latent
-    state to the goal prototype; the loop records all 9 distances.
+    state to the goal prototype; the loop records all 9 distances. A checkpoint with a presence head
+    and a calibrated threshold also says whether the asked-for target is in view (`Plan.in_view`).
     """
 
     name = "latent"
@@ -102,9 +110,18 @@ class LatentPlannerAdapter:
         # machine two threads made a plan take ~900 ms instead of ~5 ms (measured).
         self._planner = LatentPlanner(self.checkpoint_dir, threads=threads)
 
+    @property
+    def judges_presence(self) -> bool:
+        """Whether its plans say if the asked-for target is in view (`Plan.in_view`): a presence head and
+        a calibrated threshold. The loop asks only a planner that does (`planning.loop`)."""
+        return self._planner.presence_threshold is not None
+
     def plan(self, observation: Observation) -> Plan:
-        action, distances = self._planner.plan(observation.image, observation.instruction)
-        return Plan(action, tuple(float(d) for d in distances))
+        actions, distances, presence = self._planner.plan_with_presence(
+            [observation.image], observation.instruction
+        )
+        p = None if presence is None else float(presence[0])
+        return Plan(actions[0], tuple(float(d) for d in distances[0]), p, self._planner.in_view(p))
 
 
 class ClassicPlanner:

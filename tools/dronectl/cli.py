@@ -50,6 +50,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train-detector": ("dronectl.train_detector_cmd", "train the image-based target detector"),
     "train": ("dronectl.train_cmd", "train the latent dynamics planner"),
     "evaluate": ("dronectl.evaluate_cmd", "evaluate a trained planner checkpoint on a dataset"),
+    "calibrate-presence": (
+        "dronectl.calibrate_presence_cmd",
+        "choose the planner's 'not in view' threshold on validation scenes, into its checkpoint",
+    ),
     "reproduce": ("dronectl.reproduce_cmd", "run the paper's experiments and write a report"),
     "fly": ("dronectl.fly_cmd", "fly one centring mission and write a report"),
     "console": ("dronectl.console_cmd", "the operator's live console in the browser"),

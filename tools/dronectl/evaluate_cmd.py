@@ -117,10 +117,14 @@ def _print_result(result: EvalResult, detailed: bool) -> None:
             f"{k} in view: {100 * g['rank1']:.2f}% of {g['n']}" for k, g in result.by_targets_in_view.items()
         ]
         print("rank-1 by targets in view: " + ", ".join(parts))
-    if result.presence is not None:
-        pr = result.presence
+    for what, pr in (
+        ("in these words", result.presence),
+        ("by kind, as the loop asks", result.presence_by_kind),
+    ):
+        if pr is None:
+            continue
         print(
-            f"not in view: AUROC {pr['auroc']:.4f}; at p < {pr['threshold']:.3f}: accuracy "
+            f"not in view ({what}): AUROC {pr['auroc']:.4f}; at p < {pr['threshold']:.3f}: accuracy "
             f"{100 * pr['accuracy']:.2f}% ({pr['n_present']} present, {pr['n_absent']} absent pairs), "
             f"present called absent {100 * pr['false_absent_rate']:.2f}%, "
             f"absent called present {100 * pr['false_present_rate']:.2f}%, "

@@ -80,6 +80,17 @@ def positive_float(text: str) -> float:
     return value
 
 
+def fraction_below_one(text: str) -> float:
+    """An argparse type: a fraction in [0, 1)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(value) and 0.0 <= value < 1.0):
+        raise argparse.ArgumentTypeError(f"must be a fraction in [0, 1), got {text}")
+    return value
+
+
 def px4_instance_value(text: str) -> int | str:
     """An argparse type: a PX4 SITL instance, 0..9, or `auto`."""
     return text if text == "auto" else at_least(0, 9)(text)

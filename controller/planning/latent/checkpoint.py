@@ -8,6 +8,11 @@ tensor names and shapes as the config implies, the image size recorded in the
 safetensors metadata against the config's, vocabulary size, and that the weights
 reproduce the probe output. Every failure is
 a `PlannerCheckpointError` naming the file.
+
+`config.json`'s `planner` section (`PlannerSettings`) says how the checkpoint is flown: mirror
+test-time augmentation, and the presence threshold below which the planner says the asked-for
+target is not in view (written by `dronectl calibrate-presence`, which chose it on validation
+scenes; `write_planner_settings` changes only that section, so the weights and their probe stand).
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from pydantic import Field, ValidationError
 from safetensors import SafetensorError, safe_open
 from safetensors.torch import load_file, save
 
@@ -25,6 +31,7 @@ from controller.planning.latent.config import GOAL_PROTOTYPE_RULE, ModelConfig
 from controller.planning.latent.errors import PlannerCheckpointError
 from controller.planning.latent.model import LatentDynamicsModel
 from controller.planning.latent.tokenizer import VOCAB_FILE, InstructionTokenizer
+from drone_inspect_core.config_files import StrictModel
 from drone_inspect_core.files import write_atomic, write_json_atomic
 
 WEIGHTS_FILE = "model.safetensors"
@@ -36,6 +43,22 @@ PROBE_INSTRUCTIONS = ("center the gauge in the camera view.", "please center the
 PROBE_TOLERANCE = 1e-3
 
 
+PLANNER_KEY = "planner"
+"""The section of config.json that says how the checkpoint is flown (`PlannerSettings`)."""
+
+
+class PlannerSettings(StrictModel):
+    """How a checkpoint is flown: config.json's `planner` section (absent: every default)."""
+
+    mirror_tta: bool = False
+    """Score each image's left-right mirror image too and add its distances, left and right swapped back."""
+    presence_threshold: float | None = Field(default=None, gt=0.0, lt=1.0)
+    """p(asked-for target in view) below which the planner says the target is not in view; None: the
+    checkpoint was never calibrated, and its planner says nothing about presence."""
+    presence_calibration: dict[str, Any] | None = None
+    """Where the threshold came from (validation folders, pairs, budget, rates): a record, never read."""
+
+
 @dataclass
 class LoadedCheckpoint:
     model: LatentDynamicsModel  # in eval mode
@@ -43,6 +66,11 @@ class LoadedCheckpoint:
     goal_image_embedding: torch.Tensor  # (d,)
     config: ModelConfig
     meta: dict[str, Any]  # everything else in config.json (training settings, metrics, ε)
+
+    @property
+    def planner(self) -> PlannerSettings:
+        """How this checkpoint is flown (checked when it was loaded)."""
+        return PlannerSettings.model_validate(self.meta.get(PLANNER_KEY) or {})
 
 
 def probe_input(config: ModelConfig, tokenizer: InstructionTokenizer) -> tuple[torch.Tensor, torch.Tensor]:
@@ -134,6 +162,16 @@ def load_checkpoint(folder: Path) -> LoadedCheckpoint:
     return LoadedCheckpoint(model, tokenizer, goal, config, meta)
 
 
+def write_planner_settings(folder: Path, settings: PlannerSettings) -> None:
+    """Replace config.json's `planner` section with `settings`, leaving every other field as it is
+    (written whole or not at all). The weights' probe does not depend on this section."""
+    path = Path(folder) / CONFIG_FILE
+    _read_config(path)  # a checkpoint config, whole, before anything is written
+    body = json.loads(path.read_text())
+    body[PLANNER_KEY] = settings.model_dump(mode="json", exclude_none=True)
+    write_json_atomic(path, body, indent=2)
+
+
 def _read_config(path: Path) -> tuple[ModelConfig, dict[str, Any]]:
     try:
         body = json.loads(path.read_text())
@@ -145,6 +183,14 @@ def _read_config(path: Path) -> tuple[ModelConfig, dict[str, Any]]:
         config = ModelConfig.from_dict(body.pop("model"))
     except (KeyError, TypeError, ValueError) as exc:
         raise PlannerCheckpointError(f"{path}: invalid 'model' section ({exc})") from exc
+    try:
+        PlannerSettings.model_validate(body.get(PLANNER_KEY) or {})
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"])
+        raise PlannerCheckpointError(
+            f"{path}: invalid '{PLANNER_KEY}' section: {where}: {first['msg']}"
+        ) from None
     return config, body
 
 

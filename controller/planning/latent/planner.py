@@ -12,6 +12,11 @@ third of torch's latency on one thread (docs/reproduce/README.md).
 Mirror test-time augmentation (`mirror`; default: the checkpoint's `planner.mirror_tta` in its
 config.json, else off): each decision also scores the left-right mirror image and adds its
 distances, left and right swapped back, in the same batch (about twice the work per decision).
+
+Presence: a checkpoint with a presence head gives p(asked-for target in view) with every decision
+(the mean with the mirror image's where it mirrors); `presence_threshold` is its config.json's
+`planner.presence_threshold` (chosen on validation scenes by `dronectl calibrate-presence`), None
+where it has none: below it the planner says the target is not in view (`in_view`).
 """
 
 from __future__ import annotations
@@ -61,8 +66,10 @@ class LatentPlanner:
         self.tokenizer = ckpt.tokenizer
         self.config = ckpt.config
         self.meta = ckpt.meta
-        planner_meta = self.meta.get("planner") if isinstance(self.meta.get("planner"), dict) else {}
-        self.mirror = bool(planner_meta.get("mirror_tta", False)) if mirror is None else mirror
+        settings = ckpt.planner
+        self.mirror = settings.mirror_tta if mirror is None else mirror
+        self.presence_threshold = settings.presence_threshold if self.model.presence is not None else None
+        """p(in view) below which the planner says the asked-for target is not in view; None: no verdict."""
         self._goal_image = ckpt.goal_image_embedding.unsqueeze(0)  # (1, d)
         self._cache: OrderedDict[str, tuple[torch.Tensor, torch.Tensor]] = OrderedDict()
         self._cache_size = cache_size
@@ -89,6 +96,12 @@ class LatentPlanner:
     def has_presence(self) -> bool:
         """Whether the checkpoint says how sure it is that the asked-for target is in view."""
         return self.model.presence is not None
+
+    def in_view(self, presence: float | None) -> bool | None:
+        """The planner's verdict on p(in view) at its calibrated threshold; None where it gives none."""
+        if presence is None or self.presence_threshold is None:
+            return None
+        return bool(presence >= self.presence_threshold)
 
     @torch.inference_mode()
     def plan_with_presence(
