@@ -100,7 +100,7 @@ def check_inputs(config: FlownCollectConfig) -> CheckedInputs:
             )
     goal = None
     if config.goal not in (GOAL_HERE, GOAL_SCENE) and not config.resume:
-        goal = load_goal(config.goal)
+        goal = load_goal(config.goal, config.goal_box_px)
         if goal.kind != config.kind:
             raise CollectionInputError(f"--goal {config.goal}: a goal for a {goal.kind}, not a {config.kind}")
         if goal.image_size != (model.width, model.height):

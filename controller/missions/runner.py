@@ -49,7 +49,7 @@ from controller.planning.loop_records import (
 )
 from drone_inspect_core.centring import default_epsilon_px
 from drone_inspect_core.signing import SigningKey
-from drone_inspect_core.vocabulary import Vocabulary
+from drone_inspect_core.vocabulary import Vocabulary, parse_kinds
 from flight.moves import take_off_to_start
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, flight_guard
@@ -69,12 +69,13 @@ def epsilon_for(mission: Mission, kit: FlightKit) -> float:
 
 def mission_vocabulary(mission: Mission) -> Vocabulary:
     """The words of a mission: the shipped ones, the kinds of its scene (a file's too, for a simulated
-    vehicle) and of the mission itself, and its glossary."""
+    vehicle), of the mission itself and of its detector and planner checkpoints, and its glossary."""
     if mission.is_real:
         return mission.vocabulary
     from controller.missions.setup import scene_config_for  # the simulator's scene code: simulated only
 
-    return scene_config_for(mission).vocabulary.with_glossary(mission.glossary_words())
+    vocabulary = scene_config_for(mission).vocabulary.with_kinds(parse_kinds(mission.model_kinds()))
+    return vocabulary.with_glossary(mission.glossary_words())
 
 
 def loop_config(
