@@ -226,3 +226,46 @@ def verify_goal(
             f"({du0:.1f}, {dv0:.1f}): the vehicle's local frame has moved; record a new goal"
         )
     return du, dv
+
+
+def centre_goal(
+    vehicle: Vehicle,
+    camera: Camera,
+    model: CameraModel,
+    goal: GoalRecord,
+    config: FlownCollectConfig,
+    control: PoseControl,
+) -> GoalRecord:
+    """A goal file flown to again (a goal candidate with the operator's box, or an earlier collection's
+    goal): where its target lies more than 0.3 ε from the image centre, a few small moves bring it there,
+    the target tracked from the goal image's box and the offset turned into metres by the pose geometry,
+    as `centre_by_image` does with the detector; then the goal is recorded again where the target is
+    centred (that frame, its tracked box). The goal images must show the target centred: they are the
+    planner's goal, and the centre class of the detector's sectors."""
+    assert goal.image is not None and goal.box_px is not None
+    epsilon = config.epsilon_px or model.width * 10.0 / 224.0
+    tracker = TemplateTracker(goal.image, goal.box_px)
+    centre = (model.width / 2.0, model.height / 2.0)
+    for move in range(CENTRING_MOVES + 1):
+        wait_settled(vehicle, config.settling)
+        pose, _ = sample_goal_pose(vehicle)
+        frame = fresh_frame(camera, time.monotonic())
+        found = tracker.track(frame.image)
+        if found is None:
+            raise GoalError("at the goal pose the camera does not see the goal image's target")
+        du, dv = found.centre_px[0] - centre[0], found.centre_px[1] - centre[1]
+        if abs(du) <= 0.3 * epsilon and abs(dv) <= 0.3 * epsilon:
+            if move:
+                log.info("the target is centred: the goal is recorded again here (%s)", pose)
+            return GoalRecord(pose, found.bbox_px, goal.depth_m, goal.distance_source, goal.box_source,
+                              goal.kind, (frame.width, frame.height), frame.image)  # fmt: skip
+        if move == CENTRING_MOVES:
+            break
+        target = model.point_ned(pose, (du, dv), goal.depth_m)
+        log.info("centring the target by the goal image's box: offset (%.1f, %.1f) px", du, dv)
+        fly_to(vehicle, model.pose_for_offset(target, (0.0, 0.0), goal.depth_m, pose.yaw_deg), control,
+               config.settling)  # fmt: skip
+    raise GoalError(
+        f"the target is still ({du:.1f}, {dv:.1f}) px from the image centre after {CENTRING_MOVES} moves: "
+        "bring the vehicle to the centred pose and record the goal there (--goal here)"
+    )

@@ -38,6 +38,7 @@ from controller.collection.contact_sheet import write_contact_sheet
 from controller.collection.goal import GoalRecord, load_goal, save_goal
 from controller.collection.goal_flight import (
     centre_by_image,
+    centre_goal,
     climb_to,
     record_goal,
     shipped_detector,
@@ -223,7 +224,10 @@ def _reach_goal(
     if goal is not None:  # --goal FILE, or --resume
         climb_to(vehicle, goal.pose.down_m, {})
         fly_to(vehicle, goal.pose, control, config.settling)
-        return goal, verify_goal(vehicle, camera, model, goal, agree_px)
+        seen = verify_goal(vehicle, camera, model, goal, agree_px)
+        if config.resume:  # the plan was made around this goal: it stays
+            return goal, seen
+        return centre_goal(vehicle, camera, model, goal, config, control), None
     if config.goal == GOAL_SCENE:
         climb = sim.takeoff_climb_m()
         climb_to(vehicle, vehicle.telemetry().position_ned.down_m - climb, {})
