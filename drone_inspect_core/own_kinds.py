@@ -24,13 +24,12 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from drone_inspect_core.vocabulary import (
     VocabularyError,
     kind_mapping,
     parse_kind,
     parse_kinds,
+    read_words_file,
     shipped_vocabulary,
     vocabulary_with,
 )
@@ -107,12 +106,7 @@ def load_kinds_file(path: str | Path) -> dict[str, dict[str, Any]]:
     """A kinds file: YAML with a `kinds:` section as a scene or mission file writes it (faces optional,
     images relative to the file). `VocabularyError` naming the file and the field otherwise."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise VocabularyError(f"{path}: no such kinds file") from None
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise VocabularyError(f"{path}: cannot read it: {str(exc).splitlines()[0]}") from None
+    data = read_words_file(path, f"kinds file {path}")
     if not isinstance(data, Mapping) or set(data) != {"kinds"} or not data["kinds"]:
         raise VocabularyError(
             f"{path}: expected one section `kinds:`, e.g. `kinds: {{flange: {{words: [flange, flanges]}}}}`"
