@@ -80,6 +80,17 @@ def test_mavsdk_disconnect_is_link_loss_once_telemetry_is_quiet_too() -> None:
     link.check("arm()")
 
 
+def test_a_lockstep_vehicle_is_lost_only_by_its_silence() -> None:
+    clock = FakeClock()
+    link = LinkMonitor(2.0, clock, connection_state=False)
+    link.set_connected(False)  # MAVSDK's wall-clock heartbeat timeout: a slow simulator, not a lost one
+    clock.now_s += 1.5  # telemetry in sparse bursts
+    link.check("sleep()")
+    clock.now_s += 0.6  # 2.1 s of silence: gone
+    with pytest.raises(LinkLostError):
+        link.check("sleep()")
+
+
 def test_a_command_timeout_on_a_silent_vehicle_is_a_lost_link_and_on_a_live_one_returns_at_once() -> None:
     now = [0.0]
 

@@ -101,7 +101,7 @@ def route_mavsdk_logs() -> None:
 class TelemetryCache:
     """The latest of every telemetry stream the backend reads, stored by MAVSDK's callback thread."""
 
-    def __init__(self, link_timeout_s: float) -> None:
+    def __init__(self, link_timeout_s: float, connection_state: bool = True) -> None:
         self.lock = threading.Lock()
         self.position: tuple[float, float, float] = _NAN3
         self.velocity: tuple[float, float, float] = _NAN3
@@ -116,7 +116,7 @@ class TelemetryCache:
         self.texts_received = 0  # all STATUSTEXTs so far (the deque keeps the latest only)
         self.vehicle_time_s = math.nan  # the autopilot's clock, from its ATTITUDE timestamps
         self.forward_range_m: float | None = None
-        self.link = LinkMonitor(link_timeout_s)
+        self.link = LinkMonitor(link_timeout_s, connection_state=connection_state)
 
     def subscribe(self, system: Any, tel: MavsdkTelemetry) -> None:
         def store(fn: Callable[[Any], None]) -> Callable[[Any, Any], None]:

@@ -111,7 +111,9 @@ class MavsdkVehicle(Vehicle):
                 "running and sending to this address and port? (PX4 SITL and `dronectl sim-vehicle` send "
                 "to 14540 by default)",
             )
-        self._cache = TelemetryCache(self.config.link_timeout_s)
+        # A lockstep simulator's heartbeat comes once a second of its own time: MAVSDK's wall-clock
+        # heartbeat timeout says nothing about it (`flight.link`); its silence does.
+        self._cache = TelemetryCache(self.config.link_timeout_s, connection_state=self.config.clock == "wall")
         # Keep every MAVSDK object referenced for the connection's life: a plugin left to the
         # garbage collector is destroyed with its subscriptions, and telemetry silently stops.
         self._system = system
