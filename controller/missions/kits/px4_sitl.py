@@ -51,6 +51,11 @@ from sim_world.px4_bridge.sensors import SensorNoise
 
 log = logging.getLogger(__name__)
 
+LOCKSTEP_LINK_TIMEOUT_S = 6.0
+"""PX4 SITL is silent for this long (wall time) before its link is lost: in lockstep on a busy machine it
+is starved for seconds at a time (two collections ended LINK_LOST after 2.0 s of silence at load 34),
+while a PX4 that died is still noticed within seconds (a real vehicle keeps `MavsdkConfig`'s 2 s)."""
+
 PX4_START_TIMEOUT_S = 90.0
 
 
@@ -129,7 +134,10 @@ def open_px4_sitl(
         vehicle = stack.enter_context(
             MavsdkVehicle(
                 MavsdkConfig(
-                    url=f"udpin://127.0.0.1:{mavsdk_port}", expected_system_id=system_id, clock="vehicle"
+                    url=f"udpin://127.0.0.1:{mavsdk_port}",
+                    expected_system_id=system_id,
+                    clock="vehicle",
+                    link_timeout_s=LOCKSTEP_LINK_TIMEOUT_S,
                 )
             )
         )
