@@ -51,11 +51,6 @@ from sim_world.px4_bridge.sensors import SensorNoise
 
 log = logging.getLogger(__name__)
 
-LOCKSTEP_LINK_TIMEOUT_S = 6.0
-"""PX4 SITL is silent for this long (wall time) before its link is lost: in lockstep on a busy machine it
-is starved for seconds at a time (two collections ended LINK_LOST after 2.0 s of silence at load 34),
-while a PX4 that died is still noticed within seconds (a real vehicle keeps `MavsdkConfig`'s 2 s)."""
-
 PX4_START_TIMEOUT_S = 90.0
 
 
@@ -136,8 +131,7 @@ def open_px4_sitl(
                 MavsdkConfig(
                     url=f"udpin://127.0.0.1:{mavsdk_port}",
                     expected_system_id=system_id,
-                    clock="vehicle",
-                    link_timeout_s=LOCKSTEP_LINK_TIMEOUT_S,
+                    clock="vehicle",  # its link is lost after `LOCKSTEP_LINK_TIMEOUT_S` of silence
                 )
             )
         )
