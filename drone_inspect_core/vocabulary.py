@@ -362,16 +362,22 @@ def _vocabulary_with(key: str) -> Vocabulary:
     return vocabulary
 
 
+def read_words_file(path: Path, name: str) -> Any:
+    """The YAML contents of a glossary or kinds file; `VocabularyError` starting with `name` when it is
+    missing or unreadable."""
+    try:
+        return yaml.safe_load(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise VocabularyError(f"{name}: no such file") from None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise VocabularyError(f"{name}: cannot read it: {str(exc).splitlines()[0]}") from None
+
+
 def load_glossary(path: str | Path) -> dict[str, str]:
     """A site glossary file: YAML `phrase: kind` lines (`manometer: gauge`); `VocabularyError` naming the
     file and the line's phrase otherwise (the kinds are checked when the glossary joins a vocabulary)."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise VocabularyError(f"glossary {path}: no such file") from None
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise VocabularyError(f"glossary {path}: cannot read it: {str(exc).splitlines()[0]}") from None
+    data = read_words_file(path, f"glossary {path}")
     if not isinstance(data, Mapping) or not data:
         raise VocabularyError(f"glossary {path}: expected `phrase: kind` lines, e.g. `manometer: gauge`")
     bad = [str(k) for k, v in data.items() if not isinstance(k, str) or not isinstance(v, str)]

@@ -4,7 +4,11 @@ Two signals: no telemetry message for `timeout_s` (freshness: PX4 streams attitu
 at ~90 Hz, so silence is unambiguous), or MAVSDK's connection state going false (~3 s
 after the last heartbeat) while telemetry is also quiet for `quiet_s`. A lossy radio
 can lose three heartbeats in a row (at 20 % loss, about once a minute) while attitude
-and position keep arriving: that link is alive, and is not declared lost.
+and position keep arriving: that link is alive, and is not declared lost. A simulated autopilot in
+lockstep (`clock="vehicle"`: PX4 SITL) sends its heartbeat once a second of *its* time: on a busy machine
+it runs at a third of real time or less, MAVSDK's wall-clock heartbeat timeout fires while the vehicle
+is merely slow, and its telemetry comes in sparser bursts; there only silence counts
+(`connection_state=False`).
 Getters in MAVSDK keep returning stale values after a link dies, and commands
 that are only enqueued (setpoints) still "succeed", so without this check a
 controller would fly blind.
@@ -23,7 +27,11 @@ class LinkMonitor:
     """Thread-safe: `heard()` and `set_connected()` come from MAVSDK's callback thread."""
 
     def __init__(
-        self, timeout_s: float, clock: Callable[[], float] = time.monotonic, quiet_s: float = 0.5
+        self,
+        timeout_s: float,
+        clock: Callable[[], float] = time.monotonic,
+        quiet_s: float = 0.5,
+        connection_state: bool = True,
     ) -> None:
         if not timeout_s > 0:
             raise ValueError(f"link timeout must be > 0, got {timeout_s!r}")
@@ -33,6 +41,7 @@ class LinkMonitor:
         self._lock = threading.Lock()
         self._last_heard_s = clock()
         self._connected = True
+        self._use_connection_state = connection_state
 
     def heard(self) -> None:
         """A message arrived from the vehicle."""
@@ -55,7 +64,8 @@ class LinkMonitor:
         with self._lock:
             silent_s = self._clock() - self._last_heard_s
             connected = self._connected
-        if silent_s > self.timeout_s or (not connected and silent_s > self.quiet_s):
+        disconnected = not connected and self._use_connection_state
+        if silent_s > self.timeout_s or (disconnected and silent_s > self.quiet_s):
             raise LinkLostError(origin, silent_s, self.timeout_s)
 
     def raise_if_lost(self, origin: str, quiet_s: float = 0.5, poll_s: float = 0.05) -> None:

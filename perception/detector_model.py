@@ -14,7 +14,7 @@ Inference folds batch norm into the convolutions (`fuse_for_inference`).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import torch
 import torch.nn.functional as F
@@ -131,3 +131,26 @@ def fuse_for_inference(model: CentreNet) -> CentreNet:
             module[0] = fused
             module[1] = nn.Identity()
     return model
+
+
+def grow_kinds(model: CentreNet, kinds: tuple[str, ...]) -> CentreNet:
+    """`model` with a heatmap channel more for each of `kinds` it lacks (appended after its own), every
+    other weight kept: the kinds it knows keep working while a fine-tune teaches it the new ones.
+
+    A new channel starts as the mean of the known kinds' channels (a "some target here" prior, which
+    the fine-tune then narrows to the new face) with their mean bias (their low resting score).
+    """
+    new = tuple(k for k in dict.fromkeys(kinds) if k not in model.config.kinds)
+    if not new:
+        return model
+    old_k = len(model.config.kinds)
+    grown = CentreNet(replace(model.config, kinds=(*model.config.kinds, *new)))
+    state = {k: v for k, v in model.state_dict().items() if not k.startswith("head.")}
+    grown.load_state_dict(state, strict=False)
+    w, b = model.head.weight.detach(), model.head.bias.detach()  # (K + 6, n, 1, 1), (K + 6,)
+    heat_w = w[:old_k].mean(dim=0, keepdim=True).expand(len(new), -1, -1, -1)
+    heat_b = b[:old_k].mean().expand(len(new))
+    with torch.no_grad():
+        grown.head.weight.copy_(torch.cat([w[:old_k], heat_w, w[old_k:]]))
+        grown.head.bias.copy_(torch.cat([b[:old_k], heat_b, b[old_k:]]))
+    return grown.train(model.training)

@@ -40,6 +40,7 @@ from safetensors.torch import load_file, save
 
 from drone_inspect_core.files import write_atomic, write_json_atomic
 from drone_inspect_core.onnx_runtime import OnnxModule, onnx_for
+from drone_inspect_core.own_kinds import checkpoint_kinds
 from perception.attributes import read_attribute
 from perception.detector_model import EDGE_SCALE_PX, STRIDE, CentreNet, DetectorConfig, fuse_for_inference
 from perception.errors import DetectorCheckpointError
@@ -59,7 +60,8 @@ def normalise(images_uint8: torch.Tensor) -> torch.Tensor:
 
 
 def save_checkpoint(run_dir: Path, model: CentreNet, extra: dict[str, object] | None = None) -> None:
-    """Write `model.safetensors` and `config.json` (format tag, detector config, `extra` info)."""
+    """Write `model.safetensors` and `config.json` (format tag, detector config, `extra` info: the
+    training run, and `kinds`, the words of the kinds it knows beyond the shipped ones)."""
     run_dir.mkdir(parents=True, exist_ok=True)
     state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
     write_atomic(run_dir / WEIGHTS_FILE, save(state))  # whole or not at all, as every file here
@@ -135,6 +137,8 @@ class ImageDetector:
         self._model = fuse_for_inference(model).to(memory_format=torch.channels_last)
         self._onnx = onnx_for(backend, "image detector", lambda: self._export(threads))
         self.backend = "torch" if self._onnx is None else "onnx"
+        self.own_kinds: dict[str, dict[str, object]] = {}
+        """The words of the kinds it knows beyond the shipped ones (its checkpoint's `kinds`)."""
 
     @classmethod
     def load(
@@ -144,7 +148,9 @@ class ImageDetector:
         backend: str = "auto",
         threads: int | None = 1,
     ) -> ImageDetector:
-        return cls(load_model(run_dir), score_threshold, backend, threads)
+        detector = cls(load_model(run_dir), score_threshold, backend, threads)
+        detector.own_kinds = checkpoint_kinds(run_dir)
+        return detector
 
     @classmethod
     def shipped(cls, score_threshold: float | None = None, backend: str = "auto") -> ImageDetector:

@@ -133,6 +133,15 @@ BAD = [
         "nowhere.json: no such goal file",
     ),
     (["--kind", "gauge", "--goal", "{tmp}/garbage.json", "--out", "{out}"], "garbage.json: unreadable"),
+    (
+        ["--kind", "gauge", "--goal", "scene", "--goal-box", "200,100,40,30", "--out", "{out}"],
+        "--goal-box 200,100,40,30 does not lie inside the camera's 224x224 image",
+    ),
+    (
+        ["--kind", "gauge", "--kinds", "{tmp}/kinds.yaml", "--goal", "scene", "--out", "{out}"],
+        "the kind 'gauge' is given twice (also in the shipped vocabulary)",
+    ),
+    (["--kind", "mug", "--goal", "scene", "--out", "{out}"], "--kind: unknown target kind 'mug'"),
 ]
 
 
@@ -141,6 +150,7 @@ def test_bad_input_is_one_named_line_before_anything_flies(
     args: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     (tmp_path / "garbage.json").write_text("{not json")
+    (tmp_path / "kinds.yaml").write_text("kinds: {gauge: {words: [gauge, dial]}}\n")
     argv = [
         "collect",
         "--vehicle",

@@ -30,6 +30,16 @@ def test_every_planner_flies_the_same_scenes_and_skipped_seeds_are_replaced() ->
     assert benchmark_missions(fixed, "random", frozenset())[0].loop.scale_moves is False
 
 
+def test_a_site_benchmark_flies_one_scene_from_starts_drawn_in_the_ranges_given() -> None:
+    config = BenchmarkConfig(n=4, seed=3, planners=("latent",), scene_seed=0, distance_m=(1.6, 2.4))
+    missions = benchmark_missions(config, "latent", frozenset())
+    assert {m.scene.seed for m in missions} == {0}  # the site
+    starts = [m.start.random for m in missions]
+    assert len({s.seed for s in starts}) == 4 and all(s.distance_m == (1.6, 2.4) for s in starts)
+    unseen = benchmark_missions(BenchmarkConfig(n=4, seed=3, planners=("latent",)), "latent", frozenset())
+    assert [m.start.random.seed for m in unseen] == [s.seed for s in starts]  # the same starts' draws
+
+
 def test_summary_counts_successes_steps_over_the_oracle_and_refinement_moves() -> None:
     config = BenchmarkConfig(n=2, seed=1, planners=("latent", "oracle"))
     results = [

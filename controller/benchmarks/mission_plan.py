@@ -68,6 +68,9 @@ class BenchmarkConfig:
     view_fraction: tuple[float, float] = (0.1, 0.85)
     distance_m: tuple[float, float] = (1.5, 3.0)
     yaw_deg: tuple[float, float] = (-10.0, 10.0)
+    scene_seed: int | None = None
+    """Fly every mission in this one scene of the family (a site: the one a collection was flown in), from
+    starts drawn per mission; None: a scene seed of its own per mission (unseen scenes)."""
     instructions: str | None = None
     """The corpus ("train" / "heldout") of the phrases naming the target; None: "heldout" with several
     targets, twins or absent missions, else today's "center the <kind>"."""
@@ -116,6 +119,12 @@ class BenchmarkConfig:
             )
         if self.instructions_per_flight > 1 and self.absent > 0:
             raise ValueError("absent targets go with one instruction per flight")
+        if self.scene_seed is not None and self.scene_seed < 0:
+            raise ValueError(f"scene_seed must be >= 0, got {self.scene_seed}")
+        for name, (lo, hi) in (("view_fraction", self.view_fraction), ("distance_m", self.distance_m),
+                               ("yaw_deg", self.yaw_deg)):  # fmt: skip
+            if not lo <= hi:
+                raise ValueError(f"{name}: the range [{lo:g}, {hi:g}] is empty")
 
     @property
     def corpus(self) -> str | None:
@@ -159,7 +168,8 @@ def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozen
             **base.model_dump(mode="json", exclude_unset=True),
             "name": f"bench-{config.seed}-{len(missions):04d}-{planner}",
             "tags": [*base.tags, ABSENT_TAG] if absent else list(base.tags),
-            "scene": {**base.scene.model_dump(mode="json"), "seed": seed},
+            "scene": {**base.scene.model_dump(mode="json"), "seed": seed if config.scene_seed is None
+                      else config.scene_seed},
             "start": {"random": {
                 "seed": seed, "view_fraction": list(config.view_fraction),
                 "distance_m": list(config.distance_m), "yaw_deg": list(config.yaw_deg),

@@ -51,7 +51,12 @@ def _load_models(config: BenchmarkConfig) -> LoadedModels:
     if base.detector == "image":
         path = base.detector_checkpoint
         detector = ImageDetector.shipped() if path is None else ImageDetector.load(path)
-    return LoadedModels(detector=detector, latent=latent, latent_checkpoint=base.checkpoint)
+    return LoadedModels(
+        detector=detector,
+        latent=latent,
+        latent_checkpoint=base.checkpoint,
+        detector_checkpoint=base.detector_checkpoint,
+    )
 
 
 MISSION_RRD = "mission.rrd"

@@ -116,6 +116,9 @@ class FlownCollectConfig:
     distance_m: float | None = None
     """The target's distance from the goal pose along the camera's axis; None: the forward rangefinder."""
     camera_file: Path | None = None
+    kinds_file: Path | None = None
+    """A kinds file (`kinds:` as a scene or mission file writes it) adding the kind collected: a target of
+    one's own, named and given its words once (`controller.collection.inputs`)."""
     n_goal: int = 20
     n_per_sector: int = 20
     """Captures in each of the eight sectors and the centre class."""
@@ -144,7 +147,9 @@ class FlownCollectConfig:
                 "--goal: say where the goal is: here, scene (a simulated vehicle) or a goal.json"
             )
         if not self.kind:
-            raise ValueError("--kind: name the target's kind (gauge, valve, switchbox)")
+            raise ValueError(
+                "--kind: name the target's kind (gauge, valve, switchbox, or one of yours: --kinds FILE)"
+            )
         if self.out_dir is None or not str(self.out_dir):
             raise ValueError(
                 "--out: give the dataset folder (new or empty; with --resume, the one to go on with)"

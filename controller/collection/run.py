@@ -33,41 +33,37 @@ from controller.collection.capture import (
     now_iso,
     on_camera_loss,
 )
-from controller.collection.config import GOAL_HERE, GOAL_SCENE, FlownCollectConfig
+from controller.collection.config import GOAL_SCENE, FlownCollectConfig
 from controller.collection.contact_sheet import write_contact_sheet
 from controller.collection.goal import GoalRecord, load_goal, save_goal
 from controller.collection.goal_flight import (
     centre_by_image,
+    centre_goal,
     climb_to,
     record_goal,
     shipped_detector,
     take_offboard_here,
     verify_goal,
 )
+from controller.collection.inputs import CheckedInputs, CollectionInputError, check_inputs
 from controller.collection.labels import LabelMaker
 from controller.collection.plan import PlannedCapture, PlanSettings, plan_captures
 from controller.collection.pose_flight import fly_to, pose_of
-from controller.collection.vehicles import SIM_CAMERA_OFFSET_FRD_M, open_collection_vehicle
+from controller.collection.vehicles import open_collection_vehicle
 from controller.collection.writer import FlownDataset
 from drone_inspect_core.centring import default_epsilon_px
 from drone_inspect_core.dataset import FLOWN, is_flagged
-from drone_inspect_core.vocabulary import UnknownKindError, shipped_vocabulary
 from flight.errors import FlightError
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import GeofenceBox, SafetyLimits, safe_stop
 from flight.signals import StopRequested
 from flight.vehicle import Vehicle
 from perception.camera import Camera
-from perception.camera_model import CameraModel, load_camera_file
+from perception.camera_model import CameraModel
 
 log = logging.getLogger(__name__)
 
 FORMAT = "dronectl.flown/1"
-SIM_IMAGE_PX, SIM_HFOV_DEG = 224, 60.0
-
-
-class CollectionInputError(ValueError):
-    """Bad input found before anything flies (a kind, a file, a folder); one line naming it."""
 
 
 @dataclass(frozen=True)
@@ -78,45 +74,6 @@ class FlownResult:
     flagged: int
     tally: CollectionTally
     contact_sheet: Path | None
-
-
-def camera_model_for(config: FlownCollectConfig) -> CameraModel:
-    """The camera file's model, else the simulated camera's (a real vehicle needs a camera file)."""
-    if config.camera_file is not None:
-        return load_camera_file(config.camera_file)
-    if config.simulated:
-        return CameraModel.from_fov(
-            SIM_IMAGE_PX, SIM_IMAGE_PX, SIM_HFOV_DEG, offset_frd_m=SIM_CAMERA_OFFSET_FRD_M
-        )
-    raise CollectionInputError(
-        "--camera-file: a real vehicle's camera needs its intrinsics (a file with width, height and hfov_deg "
-        "or a calibrated matrix; docs/own-target.md)"
-    )
-
-
-def check_inputs(config: FlownCollectConfig) -> tuple[CameraModel, GoalRecord | None]:
-    """Everything that can be checked before connecting: the kind, the camera file, the goal file."""
-    vocabulary = shipped_vocabulary()
-    if config.simulated and config.sim.scene_file is not None:
-        from sim_world.scene.config import load_scene_config  # a simulated world's kinds: its scene's too
-
-        vocabulary = load_scene_config(config.sim.scene_file).vocabulary
-    try:
-        vocabulary.kind(config.kind)
-    except UnknownKindError as exc:
-        raise CollectionInputError(f"--kind: {exc}") from None
-    model = camera_model_for(config)
-    goal = None
-    if config.goal not in (GOAL_HERE, GOAL_SCENE) and not config.resume:
-        goal = load_goal(config.goal)
-        if goal.kind != config.kind:
-            raise CollectionInputError(f"--goal {config.goal}: a goal for a {goal.kind}, not a {config.kind}")
-        if goal.image_size != (model.width, model.height):
-            raise CollectionInputError(
-                f"--goal {config.goal}: its image is {goal.image_size[0]}x{goal.image_size[1]} px, the "
-                f"camera's {model.width}x{model.height}"
-            )
-    return model, goal
 
 
 def safety_limits(config: FlownCollectConfig) -> SafetyLimits:
@@ -146,7 +103,8 @@ def collect_flown(config: FlownCollectConfig, on_capture: OnCapture | None = Non
 
     `on_capture` is called after each capture is written (tests inject faults there).
     """
-    model, goal = check_inputs(config)
+    checked = check_inputs(config)
+    model, goal = checked.camera, checked.goal
     if goal is None and not config.resume and config.goal_box_px is None:
         shipped_detector()  # on the ground, before anything flies (see its docstring)
     dataset = FlownDataset(config.out_dir, config.resume)
@@ -165,7 +123,7 @@ def collect_flown(config: FlownCollectConfig, on_capture: OnCapture | None = Non
         with open_collection_vehicle(config, dataset.flight_dir) as (opened, sim):
             safe = SafeVehicle(opened.vehicle, safety_limits(config))
             dataset.write_meta(
-                _meta(config, model, epsilon, agree, dataset, goal, plan, tally, started, False)
+                _meta(config, checked, epsilon, agree, dataset, goal, plan, tally, started, False)
             )
             safe.connect()
             vehicle0 = math.nan
@@ -180,7 +138,7 @@ def collect_flown(config: FlownCollectConfig, on_capture: OnCapture | None = Non
                 safe.limits = replace(safe.limits, geofence=goal_fence(config, goal.pose.yaw_deg))
                 safe.origin = _position(goal)
                 dataset.write_meta(
-                    _meta(config, model, epsilon, agree, dataset, goal, plan, tally, started, False)
+                    _meta(config, checked, epsilon, agree, dataset, goal, plan, tally, started, False)
                 )
                 labels = LabelMaker(model, goal, agree)
                 if seen_at_goal is not None:  # a goal flown to again: the pose estimate's drift since then
@@ -214,7 +172,7 @@ def collect_flown(config: FlownCollectConfig, on_capture: OnCapture | None = Non
         tally.wall_s = time.perf_counter() - wall0
         dataset.close()
         dataset.write_meta(
-            _meta(config, model, epsilon, agree, dataset, goal, plan, tally, started, complete)
+            _meta(config, checked, epsilon, agree, dataset, goal, plan, tally, started, complete)
         )
         sheet = write_contact_sheet(dataset.root, dataset.rows, epsilon, dataset.root / "contact_sheet.png")
     counts = dict(Counter(row["split"] for row in dataset.rows if not is_flagged(row)))
@@ -266,7 +224,10 @@ def _reach_goal(
     if goal is not None:  # --goal FILE, or --resume
         climb_to(vehicle, goal.pose.down_m, {})
         fly_to(vehicle, goal.pose, control, config.settling)
-        return goal, verify_goal(vehicle, camera, model, goal, agree_px)
+        seen = verify_goal(vehicle, camera, model, goal, agree_px)
+        if config.resume:  # the plan was made around this goal: it stays
+            return goal, seen
+        return centre_goal(vehicle, camera, model, goal, config, control), None
     if config.goal == GOAL_SCENE:
         climb = sim.takeoff_climb_m()
         climb_to(vehicle, vehicle.telemetry().position_ned.down_m - climb, {})
@@ -282,7 +243,7 @@ def _reach_goal(
 
 def _meta(
     config: FlownCollectConfig,
-    model: CameraModel,
+    checked: CheckedInputs,
     epsilon: float,
     agree: float,
     dataset: FlownDataset,
@@ -293,6 +254,7 @@ def _meta(
     complete: bool,
 ) -> dict[str, Any]:
     """`dataset.json` of a flown collection (written at the start, once the goal is known, and at the end)."""
+    model = checked.camera
     previous = dataset.meta
     flights = [f for f in previous.get("flights", []) if f.get("flight") != dataset.flight]
     flights.append(
@@ -323,6 +285,7 @@ def _meta(
         "epsilon_px": epsilon,
         "agree_px": agree,
         "kind": config.kind,
+        "kinds": checked.kinds,
         "sectors": "where the target lies in the image: N = above centre (dv < -eps, |du| <= eps), "
         "E = right (du > eps), ...; 'centre' = within eps on both axes; 'none' = out of view",
         "goal": None if goal is None else goal.as_dict(model),

@@ -48,6 +48,8 @@ from controller.training.data import ImageSet, TargetRef, load_images, load_inde
 from controller.training.instructions import builtin_templates, fill, read_templates
 from controller.training.pairs import named_target_name
 from controller.training.phrasing import describe, is_kind_phrase_file, read_kind_phrases
+from drone_inspect_core.own_kinds import words_only
+from drone_inspect_core.vocabulary import Vocabulary, vocabulary_with
 
 log = logging.getLogger(__name__)
 
@@ -186,12 +188,16 @@ def score(
 
 
 def pair_described(
-    targets: Sequence[tuple[TargetRef, ...]], templates: Sequence[str], corpus: str, seed: int
+    targets: Sequence[tuple[TargetRef, ...]],
+    templates: Sequence[str],
+    corpus: str,
+    seed: int,
+    vocabulary: Vocabulary | None = None,
 ) -> list[str]:
-    """One instruction per image asking for its named target by a synonym of `corpus`, with its
-    colour where another target of its kind is in view (seeded)."""
+    """One instruction per image asking for its named target by a synonym of `corpus` (of `vocabulary`),
+    with its colour where another target of its kind is in view (seeded)."""
     rng = np.random.default_rng(seed)
-    return [describe(named_target_name(refs, False), templates, corpus, rng) for refs in targets]
+    return [describe(named_target_name(refs, False), templates, corpus, rng, vocabulary) for refs in targets]
 
 
 def pair_kind_phrases(
@@ -224,8 +230,13 @@ def instructions_for(ckpt: LoadedCheckpoint, data: ImageSet, setting: str, seed:
     templates = instruction_templates(setting, trained_with)
     if train_meta.get("target_choice", "named") == "described" and data.targets:
         corpus = "heldout" if setting == "heldout" else ("fixed" if trained_with == "fixed" else "train")
-        return pair_described(data.targets, templates, corpus, seed)
+        return pair_described(data.targets, templates, corpus, seed, checkpoint_vocabulary(ckpt))
     return pair_instructions(data.kinds, templates, seed)
+
+
+def checkpoint_vocabulary(ckpt: LoadedCheckpoint) -> Vocabulary:
+    """The shipped vocabulary with the kinds the checkpoint was trained on beyond it (a fine-tune's)."""
+    return vocabulary_with(words_only(ckpt.meta.get("kinds") or {}))
 
 
 def _rank1_by(result: EvalResult, keys: Sequence[str]) -> dict[str, dict[str, float]]:
@@ -253,7 +264,8 @@ def asker(ckpt: LoadedCheckpoint, setting: str) -> Ask:
         templates, corpus = builtin_templates("heldout"), "heldout"
     else:
         templates = instruction_templates(setting, trained_with)
-    return lambda name, rng: describe(name, templates, corpus, rng)
+    vocabulary = checkpoint_vocabulary(ckpt)
+    return lambda name, rng: describe(name, templates, corpus, rng, vocabulary)
 
 
 def evaluate_loaded(

@@ -11,7 +11,7 @@ from controller.missions.schema import Mission
 from controller.planning.grounding import TargetQuery, understand
 from controller.planning.loop_records import CentringConfig
 from drone_inspect_core.centring import default_epsilon_px
-from drone_inspect_core.vocabulary import Vocabulary
+from drone_inspect_core.vocabulary import Vocabulary, parse_kinds
 
 FAST_SIM_FRESH_FRAME_S = 0.1
 """A sim-vehicle off real time: a frame must arrive this long after an observation begins (render,
@@ -25,12 +25,13 @@ def epsilon_for(mission: Mission, kit: FlightKit) -> float:
 
 def mission_vocabulary(mission: Mission) -> Vocabulary:
     """The words of a mission: the shipped ones, the kinds of its scene (a file's too, for a simulated
-    vehicle) and of the mission itself, and its glossary."""
+    vehicle), of the mission itself and of its detector and planner checkpoints, and its glossary."""
     if mission.is_real:
         return mission.vocabulary
     from controller.missions.setup import scene_config_for  # the simulator's scene code: simulated only
 
-    return scene_config_for(mission).vocabulary.with_glossary(mission.glossary_words())
+    vocabulary = scene_config_for(mission).vocabulary.with_kinds(parse_kinds(mission.model_kinds()))
+    return vocabulary.with_glossary(mission.glossary_words())
 
 
 def loop_config(

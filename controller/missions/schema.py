@@ -83,6 +83,7 @@ from controller.planning.grounding import InstructionRefused, parse_instruction,
 from controller.planning.loop_records import LoopSettings, Outcome
 from controller.planning.planners import PLANNERS, PlannerName
 from drone_inspect_core.config_files import ConfigFileError, Range, StrictModel, read_yaml, validate_mapping
+from drone_inspect_core.own_kinds import checkpoint_kinds
 from drone_inspect_core.sim_speed import parse_sim_speed
 from drone_inspect_core.vocabulary import (
     Vocabulary,
@@ -396,7 +397,18 @@ class Mission(StrictModel):
         """The shipped vocabulary, with the kinds of an inline scene config and of the mission itself (a
         scene file's own kinds join when the scene is built: `controller.missions.setup`)."""
         inline = self.scene.config.get("kinds") if isinstance(self.scene.config, dict) else None
-        return vocabulary_with(inline or {}, self.kinds).with_glossary(self.glossary_words())
+        return vocabulary_with(inline or {}, self.kinds, self.model_kinds()).with_glossary(
+            self.glossary_words()
+        )
+
+    def model_kinds(self) -> dict[str, dict[str, Any]]:
+        """The kinds the mission's detector and planner checkpoints were trained on beyond the shipped ones
+        (their `config.json`'s `kinds`, words only): a mission may name a kind its models know."""
+        merged: dict[str, dict[str, Any]] = {}
+        for folder in (self.detector_checkpoint, self.checkpoint):
+            if folder is not None:
+                merged.update(checkpoint_kinds(folder))
+        return merged
 
     def glossary_words(self) -> dict[str, str]:
         """The glossary's `phrase: kind` mapping (read from its file when it names one)."""

@@ -49,9 +49,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
 from typing import Any, Literal
 
 from controller.planning.latent.config import ModelConfig
+from controller.planning.planners import DEFAULT_CHECKPOINT
+
+OWN_TARGET_EPOCHS = 12
+OWN_TARGET_LR = 1e-4
 
 InstructionMode = Literal["fixed", "varied"]
 Schedule = Literal["constant", "cosine"]
@@ -205,6 +210,27 @@ class TrainConfig:
 class Preset:
     model: ModelConfig
     train: TrainConfig
+    init: Path | None = None
+    """A checkpoint the preset fine-tunes (its model config then replaces `model`); None: from scratch."""
+
+
+_GROUNDED_TRAIN = TrainConfig(
+    lr_schedule="cosine",
+    temperature=0.1,
+    weights=LossWeights(dir=1.0, rank=1.0, cons=0.1, reg=0.01),
+    augment=AugmentConfig(
+        translate=0.25,
+        brightness=0.35,
+        contrast=0.35,
+        saturation=0.3,
+        relight=0.5,
+        gamma=0.5,
+        tint=0.1,
+    ),
+    target_choice="described",
+    channels_last=True,
+    epochs=50,
+)
 
 
 PRESETS: dict[str, Preset] = {
@@ -230,23 +256,13 @@ PRESETS: dict[str, Preset] = {
             conditioning="film",
             presence_head=True,
         ),
-        TrainConfig(
-            lr_schedule="cosine",
-            temperature=0.1,
-            weights=LossWeights(dir=1.0, rank=1.0, cons=0.1, reg=0.01),
-            augment=AugmentConfig(
-                translate=0.25,
-                brightness=0.35,
-                contrast=0.35,
-                saturation=0.3,
-                relight=0.5,
-                gamma=0.5,
-                tint=0.1,
-            ),
-            target_choice="described",
-            channels_last=True,
-            epochs=50,
-        ),
+        _GROUNDED_TRAIN,
+    ),
+    # The shipped (grounded) checkpoint fine-tuned on a collection of one's own target.
+    "own-target": Preset(
+        ModelConfig(),  # unused: the model is the checkpoint's
+        replace(_GROUNDED_TRAIN, epochs=OWN_TARGET_EPOCHS, learning_rate=OWN_TARGET_LR),
+        init=DEFAULT_CHECKPOINT,
     ),
 }
 
@@ -267,6 +283,12 @@ PRESET_NOTES: dict[str, str] = {
         "(light falling off across the image, a tone curve, white balance: relight 0.5, gamma 0.5, tint "
         "0.1) for unseen looks; 50 epochs (channels-last training keeps the shipped data mix, four "
         "folders, inside the 15-minute budget)."
+    ),
+    "own-target": (
+        f"fine-tunes the shipped checkpoint ({DEFAULT_CHECKPOINT.name}) with the grounded preset's "
+        f"training settings, {OWN_TARGET_EPOCHS} epochs at a learning rate of {OWN_TARGET_LR:g}: its image "
+        "encoder is trained, the new kind's words join its tokenizer; train on your collection and a "
+        "dataset of the shipped kinds together, or it forgets them (docs/own-target.md)."
     ),
 }
 
@@ -298,4 +320,4 @@ def run_configs(
     ):
         if value is not None:
             changes[key] = value
-    return Preset(model, replace(base.train, **changes))
+    return Preset(model, replace(base.train, **changes), base.init)

@@ -26,7 +26,7 @@ from controller.planning.grounding import TargetQuery
 from controller.planning.latent.tokenizer import InstructionTokenizer
 from controller.training.data import TargetRef
 from controller.training.phrasing import COLOURS, phrasing_table, synonyms
-from drone_inspect_core.vocabulary import shipped_vocabulary
+from drone_inspect_core.vocabulary import Vocabulary, shipped_vocabulary
 
 NAMED_FRACTION = 0.5
 """Share of present samples that ask for the image's named target (the rest: any target in view)."""
@@ -57,10 +57,11 @@ def named_target_name(refs: Sequence[TargetRef], with_colour: bool) -> TargetQue
     return target_name_for(refs[0], visible, with_colour)
 
 
-def absent_names(targets: Sequence[TargetRef]) -> list[TargetQuery]:
-    """Names that match no target of the scene: a kind none has, or a kind with a colour none of it has."""
+def absent_names(targets: Sequence[TargetRef], vocabulary: Vocabulary | None = None) -> list[TargetQuery]:
+    """Names that match no target of the scene: a kind none has (of `vocabulary`'s, default the shipped
+    ones), or a kind with a colour none of it has."""
     kinds = {t.kind for t in targets}
-    names = [TargetQuery(k) for k in shipped_vocabulary().kind_names if k not in kinds]
+    names = [TargetQuery(k) for k in (vocabulary or shipped_vocabulary()).kind_names if k not in kinds]
     for kind in sorted(kinds):
         colours = {t.attribute for t in targets if t.kind == kind}
         if None in colours:
@@ -79,18 +80,20 @@ class DescriptionSampler:
         corpus: str,
         absent_fraction: float,
         named_fraction: float = NAMED_FRACTION,
+        vocabulary: Vocabulary | None = None,
     ) -> None:
+        self.vocabulary = vocabulary
         self.templates = list(templates)
         self.corpus = corpus
         self.absent_fraction = absent_fraction
         self.named_fraction = named_fraction
-        table = phrasing_table(self.templates, corpus)
+        table = phrasing_table(self.templates, corpus, vocabulary)
         keys, texts = [key for key, _ in table], [text for _, text in table]
         self.row_of = {key: i for i, key in enumerate(keys)}
         self.ids = tokenizer.batch(texts)  # (K, L)
 
     def _ids_row(self, name: TargetQuery, rng: np.random.Generator) -> int:
-        n_syn = len(synonyms(name.kind, self.corpus))
+        n_syn = len(synonyms(name.kind, self.corpus, self.vocabulary))
         key = (name.kind, name.attribute, int(rng.integers(n_syn)), int(rng.integers(len(self.templates))))
         return self.row_of[key]
 
@@ -105,7 +108,7 @@ class DescriptionSampler:
         rows, offsets, present = [], [], []
         for refs in targets:
             visible = [t for t in refs if t.in_view and np.isfinite(t.offset_px).all()]
-            absent = absent_names(refs)
+            absent = absent_names(refs, self.vocabulary)
             if absent and (not visible or rng.random() < self.absent_fraction):
                 rows.append(self._ids_row(absent[int(rng.integers(len(absent)))], rng))
                 offsets.append((0.0, 0.0))

@@ -24,7 +24,7 @@ import numpy as np
 
 from controller.planning.grounding import TargetQuery
 from controller.planning.latent.errors import InstructionError
-from drone_inspect_core.vocabulary import VocabularyError, shipped_vocabulary
+from drone_inspect_core.vocabulary import Vocabulary, VocabularyError, shipped_vocabulary
 
 SLOT = "{target}"
 CORPORA: tuple[str, ...] = ("fixed", "train", "heldout")
@@ -43,12 +43,12 @@ def fill_phrase(template: str, phrase: str) -> str:
     return template.replace(SLOT, phrase)
 
 
-def synonyms(kind: str, corpus: str) -> tuple[str, ...]:
-    """The synonyms of `kind` in `corpus` ("fixed", "train" or "heldout"); an unknown kind is spoken as
-    its name."""
+def synonyms(kind: str, corpus: str, vocabulary: Vocabulary | None = None) -> tuple[str, ...]:
+    """The synonyms of `kind` in `corpus` ("fixed", "train" or "heldout") in `vocabulary` (default: the
+    shipped one); an unknown kind is spoken as its name."""
     if corpus not in CORPORA:
         raise InstructionError(f"unknown synonym corpus {corpus!r}; choose one of {list(CORPORA)}")
-    kind_data = shipped_vocabulary().kinds.get(kind)
+    kind_data = (vocabulary or shipped_vocabulary()).kinds.get(kind)
     if kind_data is None:
         return (kind.replace("_", " "),)
     try:
@@ -57,10 +57,16 @@ def synonyms(kind: str, corpus: str) -> tuple[str, ...]:
         raise InstructionError(str(exc)) from None
 
 
-def describe(name: TargetQuery, templates: Sequence[str], corpus: str, rng: np.random.Generator) -> str:
+def describe(
+    name: TargetQuery,
+    templates: Sequence[str],
+    corpus: str,
+    rng: np.random.Generator,
+    vocabulary: Vocabulary | None = None,
+) -> str:
     """One instruction naming `name`: a random template and a random synonym of its kind."""
     template = templates[int(rng.integers(len(templates)))]
-    options = synonyms(name.kind, corpus)
+    options = synonyms(name.kind, corpus, vocabulary)
     return fill_phrase(template, noun_phrase(name, options[int(rng.integers(len(options)))]))
 
 
@@ -68,13 +74,17 @@ PhraseKey = tuple[str, str | None, int, int]
 """(kind, colour or None, synonym index, template index) of one instruction."""
 
 
-def phrasing_table(templates: Sequence[str], corpus: str) -> list[tuple[PhraseKey, str]]:
-    """Every instruction of `templates` × kinds × synonyms × (no colour, each colour), with its key.
+def phrasing_table(
+    templates: Sequence[str], corpus: str, vocabulary: Vocabulary | None = None
+) -> list[tuple[PhraseKey, str]]:
+    """Every instruction of `templates` × kinds × synonyms × (no colour, each colour), with its key, for
+    the kinds of `vocabulary` (default: the shipped ones; a fine-tune's adds its data's own kinds).
 
     The described model's tokenizer corpus, and the table its training sampler draws from."""
+    vocabulary = vocabulary or shipped_vocabulary()
     out = []
-    for kind in shipped_vocabulary().kind_names:
-        for s, synonym in enumerate(synonyms(kind, corpus)):
+    for kind in vocabulary.kind_names:
+        for s, synonym in enumerate(synonyms(kind, corpus, vocabulary)):
             for attribute in (None, *COLOURS):
                 phrase = noun_phrase(TargetQuery(kind, attribute), synonym)
                 out.extend(
@@ -83,9 +93,9 @@ def phrasing_table(templates: Sequence[str], corpus: str) -> list[tuple[PhraseKe
     return out
 
 
-def all_phrasings(templates: Sequence[str], corpus: str) -> list[str]:
+def all_phrasings(templates: Sequence[str], corpus: str, vocabulary: Vocabulary | None = None) -> list[str]:
     """The texts of `phrasing_table`: the tokenizer's corpus for a model trained on described targets."""
-    return [text for _, text in phrasing_table(templates, corpus)]
+    return [text for _, text in phrasing_table(templates, corpus, vocabulary)]
 
 
 _KIND_LINE = re.compile(r"^\s*([A-Za-z_ ]+?)\s*:\s*(.+?)\s*$")

@@ -45,6 +45,7 @@ from controller.training.data import (
     split_train_val,
     to_float,
 )
+from controller.training.finetune import TrainingWords, check_start, start_from, training_words
 from controller.training.instructions import builtin_templates, fill, tokenizer_corpus
 from controller.training.losses import LossTerms
 from controller.training.pairs import DescriptionSampler
@@ -53,6 +54,7 @@ from controller.training.train_described import goal_ids as _goal_ids
 from controller.training.train_described import model_input, ranking_terms
 from controller.training.train_described import step_described as _step_described
 from drone_inspect_core.files import claimed_dir, write_json_atomic
+from drone_inspect_core.vocabulary import shipped_vocabulary
 
 log = logging.getLogger(__name__)
 METRICS_FILE = "metrics.json"
@@ -110,8 +112,12 @@ def train(
     cfg: TrainConfig,
     progress: bool = True,
     device: str = "cpu",
+    init_dir: Path | None = None,
 ) -> TrainResult:
     """Train on `data_dir` (a collected dataset folder, or several); write the best checkpoint + metrics.
+
+    `init_dir`: fine-tune that checkpoint (`controller.training.finetune`: its model and tokenizer,
+    grown by the words of the kinds the data adds; `model_cfg` is then the checkpoint's).
 
     `device` is where the model trains ("cpu", "cuda", "cuda:1", or "auto": a GPU if torch sees
     one). Data, augmentation and their random draws stay on the CPU either way, so a GPU run
@@ -122,10 +128,14 @@ def train(
     data_dirs = [Path(data_dir)] if isinstance(data_dir, str | Path) else [Path(d) for d in data_dir]
     if not data_dirs:
         raise TrainingDataError("no dataset folder to train on")
-    index = _merged_index(data_dirs)  # a bad dataset is said before the run folder exists
+    # A bad starting checkpoint, dataset or kind is said before the run folder exists.
+    if init_dir is not None:
+        model_cfg = check_start(init_dir)
+    index = _merged_index(data_dirs)
+    words = training_words(data_dirs, init_dir)
     # The run folder must be new or empty, and a run that fails before writing leaves none behind.
     with claimed_dir(out_dir, "run folder") as claimed:
-        return _fit(index, data_dirs[0], claimed, model_cfg, cfg, progress, dev)
+        return _fit(index, data_dirs[0], claimed, model_cfg, cfg, progress, dev, words, init_dir)
 
 
 def _fit(
@@ -136,6 +146,8 @@ def _fit(
     cfg: TrainConfig,
     progress: bool,
     dev: torch.device,
+    words: TrainingWords,
+    init_dir: Path | None,
 ) -> TrainResult:
     """`train` once the data is indexed and the run folder claimed."""
     torch.set_num_threads(cfg.threads)
@@ -167,21 +179,28 @@ def _fit(
 
     templates = builtin_templates("fixed" if cfg.instructions == "fixed" else "train")
     corpus = "fixed" if cfg.instructions == "fixed" else "train"
+    vocabulary = words.vocabulary
     if described:
-        text_corpus = all_phrasings(builtin_templates("fixed") + templates, corpus)
+        text_corpus = all_phrasings(builtin_templates("fixed") + templates, corpus, vocabulary)
     else:
-        text_corpus = tokenizer_corpus()
-    tokenizer = InstructionTokenizer.train(text_corpus, model_cfg.vocab_size, model_cfg.max_tokens)
-    model_cfg = replace(model_cfg, vocab_size=tokenizer.vocab_size)
-    model = LatentDynamicsModel(model_cfg).to(
-        dev, memory_format=torch.channels_last if cfg.channels_last else torch.preserve_format
-    )
+        own = sorted(set(pool.kinds) - set(shipped_vocabulary().kinds))  # none: as ever
+        text_corpus = tokenizer_corpus() + [fill(t, k) for k in own for t in templates]
+    if init_dir is not None:
+        start = start_from(init_dir, text_corpus)
+        tokenizer, model_cfg, model = start.tokenizer, start.config, start.model
+    else:
+        tokenizer = InstructionTokenizer.train(text_corpus, model_cfg.vocab_size, model_cfg.max_tokens)
+        model_cfg = replace(model_cfg, vocab_size=tokenizer.vocab_size)
+        model = LatentDynamicsModel(model_cfg)
+    model = model.to(dev, memory_format=torch.channels_last if cfg.channels_last else torch.preserve_format)
     rng = np.random.default_rng(cfg.seed)
     sampler: _InstructionSampler | DescriptionSampler
     if described:
-        sampler = DescriptionSampler(tokenizer, templates, corpus, cfg.absent_fraction, cfg.named_fraction)
-        val_instructions = pair_described(val_set.targets, templates, corpus, cfg.seed)
-        goal_ids = _goal_ids(tokenizer, goals, corpus)
+        sampler = DescriptionSampler(
+            tokenizer, templates, corpus, cfg.absent_fraction, cfg.named_fraction, vocabulary
+        )
+        val_instructions = pair_described(val_set.targets, templates, corpus, cfg.seed, vocabulary)
+        goal_ids = _goal_ids(tokenizer, goals, corpus, vocabulary)
     else:
         sampler = _InstructionSampler(tokenizer, templates, pool.kinds)
         val_instructions = pair_instructions(val_set.kinds, templates, cfg.seed)
@@ -210,6 +229,8 @@ def _fit(
         "epsilon_px": eps,
         "dataset": {"path": str(Path(data_dir).resolve()), "meta": index.meta},
         "counts": {"goal": len(goals), "train": len(train_set), "val": len(val_set)},
+        "kinds": words.own_kinds,
+        "init": None if init_dir is None else str(init_dir),
     }
     history: list[dict[str, float]] = []
     best_acc, best_epoch, seen = -1.0, 0, 0

@@ -26,6 +26,7 @@ from controller.training.instructions import builtin_templates
 from controller.training.losses import LossTerms, total_loss
 from controller.training.pairs import DescriptionSampler, named_target_name
 from controller.training.phrasing import fill_phrase, noun_phrase, synonyms
+from drone_inspect_core.vocabulary import Vocabulary
 
 
 def ranking_terms(
@@ -57,13 +58,15 @@ def model_input(model: LatentDynamicsModel, images: torch.Tensor, channels_last:
     return images.to(model.device, memory_format=fmt)
 
 
-def goal_ids(tokenizer: InstructionTokenizer, goals: ImageSet, corpus: str) -> torch.Tensor:
+def goal_ids(
+    tokenizer: InstructionTokenizer, goals: ImageSet, corpus: str, vocabulary: Vocabulary | None = None
+) -> torch.Tensor:
     """(G, L) ids of the fixed instruction naming each goal image's centred target (stored goal mean)."""
     template = builtin_templates("fixed")[0]
     texts = []
     for refs in goals.targets:
         name = named_target_name(refs, with_colour=False)
-        texts.append(fill_phrase(template, noun_phrase(name, synonyms(name.kind, corpus)[0])))
+        texts.append(fill_phrase(template, noun_phrase(name, synonyms(name.kind, corpus, vocabulary)[0])))
     return tokenizer.batch(texts)
 
 

@@ -30,6 +30,13 @@ from flight.urls import validate_connection_url
 log = logging.getLogger(__name__)
 
 _NAN3 = (math.nan, math.nan, math.nan)
+WALL_LINK_TIMEOUT_S = 2.0
+"""A vehicle on the wall clock (a real one, a sim-vehicle at real time) is lost after this much silence."""
+LOCKSTEP_LINK_TIMEOUT_S = 6.0
+"""A simulated autopilot on its own clock (`clock="vehicle"`: PX4 SITL in lockstep, a sim-vehicle off real
+time) is lost after this much silence (wall time): on a busy machine it is starved for seconds at a time
+(px4-sitl collections and sim-mavlink benchmark missions ended LINK_LOST after 2.0-2.8 s of silence at
+load 24-34), while one that died is still noticed within seconds."""
 
 
 @dataclass(frozen=True)
@@ -38,7 +45,8 @@ class MavsdkConfig:
 
     url: str = "udpin://0.0.0.0:14540"
     timeouts: FlightTimeouts = field(default_factory=FlightTimeouts)
-    link_timeout_s: float = 2.0
+    link_timeout_s: float | None = None
+    """None: `WALL_LINK_TIMEOUT_S` on the wall clock, `LOCKSTEP_LINK_TIMEOUT_S` on the vehicle's."""
     arm_retry_period_s: float = 0.5
     altitude_tolerance_m: float = 0.3
     climb_done_speed_m_s: float = 0.2  # takeoff ends when the climb has (nearly) stopped
@@ -54,8 +62,15 @@ class MavsdkConfig:
             raise ValueError(f"MavsdkConfig.clock must be 'wall' or 'vehicle', got {self.clock!r}")
         if self.expected_system_id is not None and not 1 <= self.expected_system_id <= 255:
             raise ValueError(f"MavsdkConfig.expected_system_id must be 1..255, got {self.expected_system_id}")
-        if not (self.link_timeout_s > 0 and self.arm_retry_period_s > 0 and self.poll_s > 0):
+        if not (self.link_timeout > 0 and self.arm_retry_period_s > 0 and self.poll_s > 0):
             raise ValueError("MavsdkConfig: link_timeout_s, arm_retry_period_s and poll_s must be > 0")
+
+    @property
+    def link_timeout(self) -> float:
+        """The link timeout in use (`link_timeout_s`, else the clock's default)."""
+        if self.link_timeout_s is not None:
+            return self.link_timeout_s
+        return WALL_LINK_TIMEOUT_S if self.clock == "wall" else LOCKSTEP_LINK_TIMEOUT_S
 
 
 COMMAND_ATTEMPTS = 3
@@ -101,11 +116,7 @@ def route_mavsdk_logs() -> None:
 class TelemetryCache:
     """The latest of every telemetry stream the backend reads, stored by MAVSDK's callback thread."""
 
-    def __init__(self, link_timeout_s: float, heartbeat_paced_by_wall: bool = True) -> None:
-        """`heartbeat_paced_by_wall`: False for a simulated autopilot on its own clock (lockstep SITL): its
-        1 Hz heartbeat (simulated time) comes further apart than MAVSDK's 3 s wall-clock timeout whenever the
-        simulation runs slower than a third of real time (a loaded machine), so MAVSDK's "disconnected" is
-        no sign of a lost link there; silence for the link timeout still is."""
+    def __init__(self, link_timeout_s: float, connection_state: bool = True) -> None:
         self.lock = threading.Lock()
         self.position: tuple[float, float, float] = _NAN3
         self.velocity: tuple[float, float, float] = _NAN3
@@ -119,7 +130,7 @@ class TelemetryCache:
         self.texts = StatusTexts()
         self.vehicle_time_s = math.nan  # the autopilot's clock, from its ATTITUDE timestamps
         self.forward_range_m: float | None = None
-        self.link = LinkMonitor(link_timeout_s, quiet_s=0.5 if heartbeat_paced_by_wall else link_timeout_s)
+        self.link = LinkMonitor(link_timeout_s, connection_state=connection_state)
 
     def subscribe(self, system: Any, tel: MavsdkTelemetry) -> None:
         def store(fn: Callable[[Any], None]) -> Callable[[Any, Any], None]:

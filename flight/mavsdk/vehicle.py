@@ -10,7 +10,7 @@ Written for real PX4 (SITL or hardware) as much as for `dronectl sim-vehicle`:
   disarm and refuses the next arm); a disarm racing PX4's auto-disarm is success.
 - MAVSDK re-sends the last setpoint at 20 Hz by itself: `set_velocity_body` is
   called only when the command changes or the caller refreshes it, never in a loop.
-- link loss (no telemetry for `link_timeout_s`, or MAVSDK's connection state
+- link loss (no telemetry for `link_timeout`, or MAVSDK's connection state
   going false) raises `LinkLostError` from `telemetry()` and so from every wait;
 - `expected_system_id`: connect only to the autopilot with that MAVLink system id
   (the per-run identity of a vehicle the caller launched) and refuse any other;
@@ -68,7 +68,7 @@ class MavsdkVehicle(Vehicle):
         self.config = config or MavsdkConfig()
         self._link = link
         self.setpoints_sent = 0
-        self._cache = TelemetryCache(self.config.link_timeout_s)
+        self._cache = TelemetryCache(self.config.link_timeout)
         self._texts_at_offboard = 0  # the STATUSTEXT count when offboard was confirmed
         self._mavsdk: Mavsdk | None = None
         self._system: Any = None
@@ -111,7 +111,9 @@ class MavsdkVehicle(Vehicle):
                 "running and sending to this address and port? (PX4 SITL and `dronectl sim-vehicle` send "
                 "to 14540 by default)",
             )
-        self._cache = TelemetryCache(self.config.link_timeout_s, self.config.clock == "wall")
+        # A lockstep simulator's heartbeat comes once a second of its own time: MAVSDK's wall-clock
+        # heartbeat timeout says nothing about it (`flight.link`); its silence does.
+        self._cache = TelemetryCache(self.config.link_timeout, connection_state=self.config.clock == "wall")
         # Keep every MAVSDK object referenced for the connection's life: a plugin left to the
         # garbage collector is destroyed with its subscriptions, and telemetry silently stops.
         self._system = system

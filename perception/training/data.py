@@ -105,6 +105,14 @@ def load_samples(
             bboxes[i] = torch.tensor([u0 * sx, v0 * sy, u1 * sx, v1 * sy])
             kind_index[i] = kinds.index(row["target_kind"])
     log.info("%s: %d rows (%d positives) from %s", root, n, int((kind_index >= 0).sum()), list(splits))
+    several = sum(1 for row in chosen if len(row.get("targets") or ()) > 1)
+    if several:
+        log.warning(
+            "%s: %d rows show several targets; the detector trains on each row's named target only, so the "
+            "others are taught as background (collect one target per scene for the detector)",
+            root,
+            several,
+        )
     return DetectorSamples(images, centres, bboxes, kind_index, chosen, (sx, sy))
 
 

@@ -19,7 +19,7 @@ import json
 import logging
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -31,9 +31,8 @@ from drone_inspect_core.centring import default_epsilon_px
 from drone_inspect_core.dataset import DatasetError, load_manifest
 from drone_inspect_core.files import claimed_dir, write_json_atomic
 from perception.detector_model import STRIDE, CentreNet, DetectorConfig
-from perception.errors import DetectorCheckpointError
 from perception.evaluation.evaluate import DetectorMetrics, evaluate_detections, evaluate_on_dataset
-from perception.image_detector import ImageDetector, load_model, normalise, save_checkpoint
+from perception.image_detector import ImageDetector, normalise, save_checkpoint
 from perception.training.data import (
     DetectorSamples,
     Targets,
@@ -42,6 +41,7 @@ from perception.training.data import (
     scaled_row,
     split_train_val,
 )
+from perception.training.kinds import StartingPoint, starting_point
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +55,8 @@ class TrainDetectorConfig:
     extra_dirs: tuple[Path, ...] = ()
     """More datasets whose rows (all splits) join training, minus rows of `data_dir`'s test scene seeds."""
     init_dir: Path | None = None
-    """Start from this run's weights (fine-tuning; its config.json must match `detector`)."""
+    """Start from this run's weights (fine-tuning; kinds the data holds that it lacks are added:
+    `perception.training.kinds`)."""
     epochs: int = 30
     batch_size: int = 32
     crop_px: int = 128
@@ -64,12 +65,14 @@ class TrainDetectorConfig:
     weight_decay: float = 1e-4
     val_fraction: float = 0.1
     seed: int = 0
-    detector: DetectorConfig = field(default_factory=DetectorConfig)
+    detector: DetectorConfig | None = None
+    """The architecture (None: the default, or with `init_dir` the checkpoint's; its kinds are extended by
+    the data's)."""
 
     def __post_init__(self) -> None:
         if self.epochs < 1 or self.batch_size < 1:
             raise ValueError(f"epochs and batch_size must be >= 1, got {self.epochs}, {self.batch_size}")
-        if self.crop_px % 32 or not 64 <= self.crop_px <= self.detector.input_size:
+        if self.crop_px % 32 or not 64 <= self.crop_px <= (self.detector or DetectorConfig()).input_size:
             raise ValueError(f"crop_px must be a multiple of 32 in [64, input_size], got {self.crop_px}")
         if not 0.0 <= self.val_fraction < 1.0:
             raise ValueError(f"val_fraction must be in [0, 1), got {self.val_fraction}")
@@ -84,6 +87,8 @@ class TrainDetectorResult:
     val: DetectorMetrics | None
     test: DetectorMetrics | None
     seconds: float
+    kinds: tuple[str, ...] = ()
+    added: tuple[str, ...] = ()
 
 
 def focal_loss(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -206,6 +211,7 @@ def load_training_data(
     """(train, val, dataset.json of `data_dir`): its goal/train rows, empty rows of its training scenes
     and every row of the extra datasets except those of `data_dir`'s test scenes."""
     cfg = config.detector
+    assert cfg is not None  # resolved by `train_detector`
     _, meta = load_manifest(config.data_dir, check_images=False)
     for extra in config.extra_dirs:  # every folder checked before minutes of loading
         load_manifest(extra, check_images=False)
@@ -246,7 +252,7 @@ def train_one_epoch(
 ) -> dict[str, float]:
     """One pass over shuffled training crops; returns the mean loss parts."""
     model.train()
-    kinds_n = len(config.detector.kinds)
+    kinds_n = len(model.config.kinds)
     parts_sum: dict[str, float] = {}
     batches = _batches(len(train), config.batch_size, gen)
     for idx in tqdm(batches, desc=desc, leave=False):
@@ -267,31 +273,35 @@ def train_detector(config: TrainDetectorConfig) -> TrainDetectorResult:
     """Train; save the best epoch by validation loss as soon as it is reached; score it on the test split."""
     start = time.monotonic()
     torch.manual_seed(config.seed)
-    model = CentreNet(config.detector)
-    if config.init_dir is not None:  # a bad checkpoint is said before the data loads
-        start_from = load_model(config.init_dir)
-        if start_from.config != config.detector:
-            raise DetectorCheckpointError(
-                config.init_dir, f"its detector config {start_from.config} differs from {config.detector}"
-            )
-        model.load_state_dict(start_from.state_dict())
+    # The starting checkpoint, the datasets and the kinds' words are checked before anything trains.
+    begin = starting_point([config.data_dir, *config.extra_dirs], config.init_dir, config.detector)
+    model = begin.model
+    config = replace(config, detector=model.config)
+    if config.crop_px > model.config.input_size:
+        raise ValueError(f"crop_px {config.crop_px} exceeds the input size {model.config.input_size}")
+    if config.init_dir is not None:
         log.info("starting from the weights in %s", config.init_dir)
+        if begin.missing:
+            log.warning(
+                "no training row shows %s: the fine-tune may forget them (add a dataset of them: --extra)",
+                ", ".join(begin.missing),
+            )
     # The run folder must be new or empty, and a run that fails before writing leaves none behind.
     with claimed_dir(config.out_dir, "run folder"):
         train, val, meta = load_training_data(config)
-        return _fit(config, model, train, val, meta, start)
+        return _fit(config, begin, train, val, meta, start)
 
 
 def _fit(
     config: TrainDetectorConfig,
-    model: CentreNet,
+    begin: StartingPoint,
     train: DetectorSamples,
     val: DetectorSamples,
     meta: dict[str, Any],
     start: float,
 ) -> TrainDetectorResult:
     """`train_detector` once the data is loaded and the run folder claimed."""
-    model = model.to(memory_format=torch.channels_last)
+    model = begin.model.to(memory_format=torch.channels_last)
     optimiser = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     steps = config.epochs * math.ceil(len(train) / config.batch_size)
     schedule = torch.optim.lr_scheduler.OneCycleLR(
@@ -310,7 +320,9 @@ def _fit(
         "lr": config.lr,
         "train_images": len(train),
         "val_images": len(val),
+        "added_kinds": list(begin.added),
     }
+    kinds = {"kinds": begin.own_kinds}
     best_loss, best_epoch, best_state = float("inf"), -1, None
     with (config.out_dir / "train_log.jsonl").open("w", encoding="utf-8") as train_log:
         for epoch in range(1, config.epochs + 1):
@@ -327,7 +339,8 @@ def _fit(
             if val_loss < best_loss:
                 best_loss, best_epoch = val_loss, epoch
                 best_state = copy.deepcopy(model.state_dict())
-                save_checkpoint(config.out_dir, model, {"training": {**training, "best_epoch": epoch}})
+                best = {**kinds, "training": {**training, "best_epoch": epoch}}
+                save_checkpoint(config.out_dir, model, best)
     assert best_state is not None
     model.load_state_dict(best_state)
     model.eval()
@@ -335,7 +348,7 @@ def _fit(
     test_metrics = _score_test(model, config.data_dir)
     seconds = time.monotonic() - start
     training.update(best_epoch=best_epoch, seconds=round(seconds, 1))
-    save_checkpoint(config.out_dir, model, {"training": training})
+    save_checkpoint(config.out_dir, model, {**kinds, "training": training})
     metrics = {
         "best_val_loss": best_loss,
         "val": val_metrics.as_dict() if val_metrics else None,
@@ -346,7 +359,9 @@ def _fit(
         log.info("val: %s", val_metrics.summary())
     if test_metrics:
         log.info("test: %s", test_metrics.summary())
-    return TrainDetectorResult(best_epoch, best_loss, val_metrics, test_metrics, seconds)
+    return TrainDetectorResult(
+        best_epoch, best_loss, val_metrics, test_metrics, seconds, model.config.kinds, begin.added
+    )
 
 
 def _score_test(model: CentreNet, data_dir: Path) -> DetectorMetrics | None:

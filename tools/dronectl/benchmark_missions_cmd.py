@@ -100,6 +100,17 @@ def base_mission(args: argparse.Namespace) -> Mission:
     return parse_mission(data, source)
 
 
+def number_range(text: str) -> tuple[float, float]:
+    """`LO,HI` as two numbers, LO <= HI."""
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LO,HI (two numbers), got {text!r}") from None
+    if not lo <= hi:
+        raise argparse.ArgumentTypeError(f"expected LO <= HI, got {text!r}")
+    return lo, hi
+
+
 def _speed(option: str, text: str) -> float | str:
     try:
         return parse_sim_speed(text)
@@ -160,6 +171,21 @@ def main(argv: list[str]) -> int:
         help="moves per mission on the planner's best-ranked move after a 'no move' far from centre "
         "(default: the loop's 4; 0: such a 'no move' is a stall, the planner alone)",
     )
+    parser.add_argument(
+        "--scene-seed",
+        type=seed_value,
+        default=None,
+        help="fly every mission in this one scene of the family (a site, e.g. the one a collection was "
+        "flown in), from starts drawn per mission (default: an unseen scene per mission)",
+    )
+    for option, default in (("view-fraction", "0.1,0.85"), ("distance-m", "1.5,3.0"), ("yaw-deg", "-10,10")):
+        parser.add_argument(
+            f"--{option}",
+            type=number_range,
+            default=None,
+            metavar="LO,HI",
+            help=f"the random starts' {option.replace('-', ' ')} range (default {default})",
+        )
     parser.add_argument("--targets", type=int, help="targets in every scene, the named one included (1..4)")
     parser.add_argument(
         "--twins", action="store_true", help="one other target of the named kind, in another trim colour"
@@ -239,6 +265,9 @@ def main(argv: list[str]) -> int:
             n=args.n, seed=args.seed, planners=tuple(p.strip() for p in args.planner.split(",") if p.strip()),
             parallel=args.parallel, rerun=args.rerun, ray=args.ray, instructions=args.instructions,
             absent=args.absent, instructions_per_flight=args.instructions_per_flight,
+            scene_seed=args.scene_seed,
+            **{field: getattr(args, field) for field in ("view_fraction", "distance_m", "yaw_deg")
+               if getattr(args, field) is not None},
         )  # fmt: skip
     except (Px4FolderError, ArduPilotFolderError) as exc:
         print(f"dronectl benchmark-missions: {exc}", file=sys.stderr)

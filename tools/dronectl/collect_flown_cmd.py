@@ -53,7 +53,15 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="camera intrinsics: width, height and hfov_deg or a matrix",
     )
-    p.add_argument("--kind", default="", help="the target's kind (gauge, valve, switchbox)")
+    p.add_argument(
+        "--kind", default="", help="the target's kind (gauge, valve, switchbox, or one --kinds/--scene adds)"
+    )
+    p.add_argument(
+        "--kinds",
+        type=Path,
+        default=None,
+        help="a kinds file adding your own kind: `kinds: {flange: {words: [flange, pipe flange]}}`",
+    )
     p.add_argument(
         "--goal",
         default="",
@@ -64,7 +72,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=_goal_box,
         default=None,
         metavar="X,Y,W,H",
-        help="the target's box in the goal image (default: the detector's)",
+        help="the target's box in the goal image, pixels (default: the detector's, for a kind it knows)",
     )
     p.add_argument(
         "--distance-m",
@@ -152,6 +160,7 @@ def config_from(args: argparse.Namespace) -> FlownCollectConfig:
         out_dir=args.out, vehicle=args.vehicle, camera=args.camera, kind=args.kind, goal=args.goal,
         box=Box3.parse(args.box_m, "--box-m"), fence=Box3.parse(args.fence_m, "--fence-m"),
         goal_box_px=args.goal_box, distance_m=args.distance_m, camera_file=args.camera_file,
+        kinds_file=args.kinds,
         n_goal=args.n_goal, n_per_sector=args.n_per_sector, n_empty=args.n_empty, block_size=args.block_size,
         test_every=args.test_every, epsilon_px=args.epsilon_px, agree_px=args.agree_px,
         max_speed_m_s=args.max_speed, settling=Settling(timeout_s=args.settle_timeout_s),

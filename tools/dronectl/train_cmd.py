@@ -30,6 +30,13 @@ def build_parser() -> argparse.ArgumentParser:
         default="cpu",
         help="; ".join(f"{k}: {v}" for k, v in PRESET_NOTES.items()).replace("%", "%%"),
     )
+    p.add_argument(
+        "--init",
+        type=Path,
+        default=None,
+        help="fine-tune this planner checkpoint (its model; the data's new kinds' words join its tokenizer); "
+        "the own-target preset starts from the shipped one",
+    )
     p.add_argument("--distance", choices=DISTANCES, default=None, help="D: cosine (default), euclidean, both")
     p.add_argument("--instructions", choices=("fixed", "varied"), default=None, help="default varied")
     p.add_argument("--seed", type=seed_value, default=None)
@@ -153,6 +160,12 @@ def main(argv: list[str]) -> int:
         model_overrides=model_over,
         train_overrides=train_over,
     )
+    init = args.init or run.init
+    if init is not None and model_over:
+        raise SystemExit(
+            f"dronectl train: {', '.join(sorted(model_over))}: a fine-tune keeps its checkpoint's model "
+            f"({init}); leave the model options out"
+        )
     from controller.training.train import resolve_device, train  # torch only once arguments are valid
 
     try:
@@ -160,7 +173,13 @@ def main(argv: list[str]) -> int:
     except ValueError as exc:
         raise SystemExit(f"dronectl train: {exc}") from None
     result = train(
-        list(args.data), args.out, run.model, run.train, progress=not args.quiet, device=args.device
+        list(args.data),
+        args.out,
+        run.model,
+        run.train,
+        progress=not args.quiet,
+        device=args.device,
+        init_dir=init,
     )
     print(
         json.dumps(

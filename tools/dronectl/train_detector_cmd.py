@@ -1,4 +1,14 @@
-"""`dronectl train-detector`: train the image-based target detector on a collected dataset folder."""
+"""`dronectl train-detector`: train the image-based target detector on a collected dataset folder.
+
+    dronectl train-detector --data data/det --out runs/det
+    dronectl train-detector --data data/my-flange --extra data/rehearsal --init perception/assets/detector \
+        --out runs/det-flange --epochs 8
+
+With --init the run fine-tunes that checkpoint; a kind the datasets hold that it does not know is added
+(its head grows a class; the kinds it knows keep their weights), and the kind's words (from the dataset,
+where the collection recorded them) are saved with the new checkpoint, so missions and the planner know
+it. Give datasets of the kinds it already knows too (--extra), or the fine-tune may forget them.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +20,7 @@ from pathlib import Path
 import torch
 
 from drone_inspect_core.dataset import DatasetError
+from drone_inspect_core.vocabulary import VocabularyError
 from dronectl.options import CommandParser, at_least, seed_value
 from perception.detector_model import DetectorConfig
 from perception.errors import PerceptionError
@@ -31,7 +42,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", type=Path, required=True, help="run folder for model.safetensors, config.json, metrics"
     )
     p.add_argument(
-        "--init", type=Path, default=None, help="start from this run folder's weights (fine-tuning)"
+        "--init",
+        type=Path,
+        default=None,
+        help="fine-tune this detector checkpoint (perception/assets/detector: the shipped one); kinds the "
+        "data holds that it lacks are added",
     )
     p.add_argument("--epochs", type=at_least(1), default=30)
     p.add_argument("--batch-size", type=at_least(1), default=32)
@@ -42,7 +57,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=seed_value, default=0)
     p.add_argument("--threads", type=at_least(1), default=2, help="torch threads")
-    p.add_argument("--input-size", type=int, default=224, help="network input size (multiple of 32)")
+    p.add_argument(
+        "--input-size",
+        type=int,
+        default=None,
+        help="network input size (multiple of 32; default 224, or --init's)",
+    )
     return p
 
 
@@ -62,15 +82,17 @@ def main(argv: list[str]) -> int:
         crop_px=args.crop,
         val_fraction=args.val_fraction,
         seed=args.seed,
-        detector=DetectorConfig(input_size=args.input_size),
+        detector=None if args.input_size is None else DetectorConfig(input_size=args.input_size),
     )
     try:
         result = train_detector(config)
-    except (DatasetError, PerceptionError) as exc:
+    except (DatasetError, PerceptionError, VocabularyError) as exc:
         print(f"dronectl train-detector: {exc}", file=sys.stderr)
         return 1
     print(f"best epoch {result.best_epoch} (val loss {result.best_val_loss:.4f}) in {result.seconds:.0f} s")
-    print(f"weights: {args.out / 'model.safetensors'}")
+    print(f"weights: {args.out / 'model.safetensors'}; kinds: {', '.join(result.kinds)}")
+    if result.added:
+        print(f"added kinds: {', '.join(result.added)}")
     if result.test is not None:
         print("test:", result.test.summary())
         print(json.dumps(result.test.as_dict(), indent=2))

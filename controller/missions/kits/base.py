@@ -120,13 +120,15 @@ class LoadedModels:
     detector: Detector | None = None
     latent: Planner | None = None
     latent_checkpoint: str | None = None
+    detector_checkpoint: str | None = None
+    """The checkpoint `detector` was loaded from (None: the shipped weights)."""
 
 
 def models_detector(mission: Mission, models: LoadedModels | None) -> Detector | None:
-    """The shared image detector, when the mission asks for the default one."""
-    if models is None or mission.detector != "image" or mission.detector_checkpoint is not None:
+    """The shared image detector, when the mission asks for the image detector of the same checkpoint."""
+    if models is None or mission.detector != "image":
         return None
-    return models.detector
+    return models.detector if mission.detector_checkpoint == models.detector_checkpoint else None
 
 
 def models_planner(mission: Mission, models: LoadedModels | None, truth: TruthProbe | None) -> Planner | None:

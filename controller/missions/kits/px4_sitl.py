@@ -121,7 +121,9 @@ def open_px4_sitl(
         vehicle = stack.enter_context(
             MavsdkVehicle(
                 MavsdkConfig(
-                    url=f"udpin://127.0.0.1:{mavsdk_port}", expected_system_id=system_id, clock="vehicle"
+                    url=f"udpin://127.0.0.1:{mavsdk_port}",
+                    expected_system_id=system_id,
+                    clock="vehicle",  # its link is lost after `LOCKSTEP_LINK_TIMEOUT_S` of silence
                 )
             )
         )

@@ -110,6 +110,32 @@ class InstructionTokenizer:
         write_atomic(folder / VOCAB_FILE, "\n".join(ordered) + "\n")
         write_json_atomic(folder / TOKENIZER_FILE, json.loads(self._tok.to_str()), indent=1)
 
+    def with_words(self, corpus: Sequence[str]) -> InstructionTokenizer:
+        """This tokenizer with every word of `corpus` it lacks appended as a whole token, the known
+        tokens' ids unchanged: a fine-tune's new words (a kind of one's own) each get an embedding row
+        of their own instead of being spelt from pieces. Itself when it lacks none."""
+        vocab = self._tok.get_vocab()
+        new: dict[str, None] = {}
+        for line in corpus:
+            text = self._tok.normalizer.normalize_str(line)  # type: ignore[union-attr]
+            for word, _ in self._tok.pre_tokenizer.pre_tokenize_str(text):  # type: ignore[union-attr]
+                if word not in vocab:
+                    new[word] = None
+        if not new:
+            return self
+        tokens = [*sorted(vocab, key=vocab.__getitem__), *new]
+        tok = _empty_tokenizer(WordPiece(vocab={t: i for i, t in enumerate(tokens)}, unk_token="[UNK]"))
+        _add_post_processor(tok)
+        return InstructionTokenizer(tok, self.max_tokens)
+
+    def token(self, token_id: int) -> str:
+        """The token of an id ([UNK] for one out of range)."""
+        return self._tok.id_to_token(token_id) or "[UNK]"
+
+    def pieces(self, word: str) -> list[int]:
+        """The ids `word` is spelt with, without [CLS] and [SEP]."""
+        return self._tok.encode(word, add_special_tokens=False).ids
+
     @property
     def vocab_size(self) -> int:
         return self._tok.get_vocab_size()
