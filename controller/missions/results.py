@@ -53,6 +53,8 @@ class MissionResult:
     """What could not be written (a full disk, a read-only folder): the flight went on without it."""
     report_written: bool = True
     """Whether report.json holds the final state (False: only the console has the outcome)."""
+    phases_s: dict[str, float] = field(default_factory=dict)
+    """Wall seconds per phase of the mission (`controller.missions.phases.PHASES`, the loop's parts)."""
 
     @property
     def final_truth_error_px(self) -> float | None:

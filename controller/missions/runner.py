@@ -29,6 +29,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from controller.missions.kits.base import FlightKit, LoadedModels
+from controller.missions.phases import flight_phases
 from controller.missions.report import (
     REPORT_JSON,
     ReportWriter,
@@ -50,7 +51,7 @@ from controller.planning.loop_records import (
 from drone_inspect_core.centring import default_epsilon_px
 from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.vocabulary import Vocabulary
-from flight.moves import take_off_to_start
+from flight.moves import Milestones, take_off_to_start
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, flight_guard
 from flight.signals import StopRequested
@@ -111,7 +112,7 @@ def fly_kit(
     """Fly the centring loop with `kit` and write the report folder; never loses a recorded step.
     `rerun_path`: also record the flight to this new .rrd file (`controller.missions.rerun_log`)."""
     out_dir = Path(out_dir)
-    wall_start = time.perf_counter()
+    clock = Milestones()  # on the vehicle's clock (PX4 SITL's: simulated time), and each on the wall clock
     kit = replace(kit, epsilon_px=epsilon_for(mission, kit))  # ε resolved here, once, for every kit
     # A kit may bring its vehicle already behind the safety limits (the in-process sim does).
     vehicle = kit.vehicle if isinstance(kit.vehicle, SafeVehicle) else SafeVehicle(kit.vehicle, limits)
@@ -148,7 +149,6 @@ def fly_kit(
     )
     outcome, message, error = Outcome.ABORTED, "", None
     vehicle_start_s = vehicle_end_s = 0.0
-    clock: dict[str, float] = {}  # milestones on the vehicle's clock (PX4 SITL's: simulated time)
     targets_truth: list[tuple[float, float] | None] | None = None  # every target, when the loop ended
     try:
         vehicle.connect()
@@ -160,10 +160,11 @@ def fly_kit(
             result = loop.run()
             outcome, message = result.outcome, result.message
             targets_truth = kit.targets_truth() if kit.targets_truth is not None else None
-            vehicle_end_s = vehicle.time_s()
+            vehicle_end_s = clock["loop_end_s"] = vehicle.time_s()
             vehicle.stop_offboard()
             vehicle.land()
             vehicle.disarm()
+            clock["landed_s"] = vehicle.time_s()
     except KeyboardInterrupt as exc:
         how = str(exc) if isinstance(exc, StopRequested) else "stopped by Ctrl-C"
         error = message = f"interrupted ({how}); a vehicle in the air was held, then landed"
@@ -179,7 +180,7 @@ def fly_kit(
                 writer.recording_errors.append(f"the Rerun recording: {exc}")
                 log.error("the Rerun recording could not be finished: %s", exc)
         mission_result = _finish(
-            kit, mission, writer, loop, outcome, message, error, time.perf_counter() - wall_start,
+            kit, mission, writer, loop, outcome, message, error, time.perf_counter() - clock.started,
             max(0.0, vehicle_end_s - vehicle_start_s), clock, targets_truth,
         )  # fmt: skip
     return mission_result
@@ -226,10 +227,11 @@ def _finish(
     error: str | None,
     wall_s: float,
     vehicle_s: float,
-    clock: dict[str, float],
+    clock: Milestones,
     targets_truth: list[tuple[float, float] | None] | None,
 ) -> MissionResult:
     steps = loop.steps
+    phases = flight_phases(clock.wall_s, [s.timing for s in steps])
     final_truth = steps[-1].truth_offset_px if steps else None
     final_detector = steps[-1].offset_px if steps else None
     n_steps = count_steps(steps)
@@ -257,12 +259,15 @@ def _finish(
         "wall_s": round(wall_s, 3),
         "vehicle_s": round(vehicle_s, 3),
         "vehicle_clock_s": {name: round(value, 3) for name, value in clock.items()},
+        "phases_wall_s": phases,
         "truth_extremes": kit.truth_extremes() if kit.truth_extremes is not None else None,
         "error": error,
     }
     if kit.tlog is not None and kit.tlog.recording_error is not None:
         writer.recording_errors.append(f"flight.tlog: {kit.tlog.recording_error}")
+    report_start = time.perf_counter()
     final = writer.finish(summary, None if kit.tlog is None else kit.tlog.path)
+    phases["report"] = round(time.perf_counter() - report_start, 4)
     return MissionResult(
         name=mission.name,
         planner=kit.planner.name,
@@ -289,6 +294,7 @@ def _finish(
         wrong_target=wrong is not None,
         recording_errors=tuple(final["recording_errors"]),
         report_written=final["report_written"],
+        phases_s=phases,
     )
 
 
@@ -357,8 +363,13 @@ def run_mission(
             from controller.missions.rerun_log import check_rerun_path
 
             rerun_path = check_rerun_path(rerun_path)
+        started = time.perf_counter()
         with open_kit(mission, out_dir, limits, models, signing_key) as kit:
-            return fly_kit(kit, mission, out_dir, limits, media, rerun_path)
+            opened = time.perf_counter()
+            result = fly_kit(kit, mission, out_dir, limits, media, rerun_path)
+            closing = time.perf_counter()
+        phases = {"start": opened - started, **result.phases_s, "close": time.perf_counter() - closing}
+        return replace(result, phases_s={name: round(value, 4) for name, value in phases.items()})
     except BaseException as exc:
         if not (out_dir / REPORT_JSON).exists():  # it failed before the flight's own report began
             write_setup_failure(out_dir, mission, exc)
