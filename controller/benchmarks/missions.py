@@ -15,6 +15,7 @@ column. Absent-target missions count apart: ended `target_not_found` / flew a mo
 
 from __future__ import annotations
 
+import atexit
 import json
 import logging
 import statistics
@@ -30,7 +31,7 @@ from controller.benchmarks.mission_plan import ABSENT_TAG, BenchmarkConfig, benc
 from controller.missions.kits.base import LoadedModels
 from controller.missions.report import REPORT_JSON, claim_report_dir
 from controller.missions.results import MissionResult
-from controller.missions.schema import Mission, parse_mission
+from controller.missions.schema import SIM_MAVLINK, Mission, parse_mission
 from controller.missions.suite import failed_to_start
 from drone_inspect_core.files import release_claim
 from drone_inspect_core.parallel import gather, task_executor
@@ -40,6 +41,8 @@ log = logging.getLogger(__name__)
 
 
 def _load_models(config: BenchmarkConfig) -> LoadedModels:
+    """The models every mission of the benchmark shares, and the simulator it keeps warm (a simulated
+    MAVLink vehicle, reset for each mission: `controller.missions.kits.warm`) unless told not to."""
     from controller.planning.planners import LatentPlannerAdapter
     from perception.image_detector import ImageDetector
 
@@ -49,8 +52,18 @@ def _load_models(config: BenchmarkConfig) -> LoadedModels:
     if base.detector == "image":
         path = base.detector_checkpoint
         detector = ImageDetector.shipped() if path is None else ImageDetector.load(path)
-    return LoadedModels(detector=detector, latent=latent, latent_checkpoint=base.checkpoint)
+    simulators = None
+    if config.warm and base.vehicle in WARM_VEHICLES:
+        from controller.missions.kits.warm import WarmSimulators
 
+        simulators = WarmSimulators()
+    return LoadedModels(
+        detector=detector, latent=latent, latent_checkpoint=base.checkpoint, simulators=simulators
+    )
+
+
+WARM_VEHICLES = (SIM_MAVLINK,)
+"""The simulated vehicles a benchmark keeps warm between missions (`BenchmarkConfig.warm`)."""
 
 MISSION_RRD = "mission.rrd"
 """A mission's Rerun recording in its report folder (`rerun=True`)."""
@@ -63,7 +76,9 @@ def _init_worker(config: BenchmarkConfig) -> None:
     import torch
 
     torch.set_num_threads(1)
-    _WORKER_MODELS["models"] = _load_models(config)
+    models = _WORKER_MODELS["models"] = _load_models(config)
+    if models.simulators is not None:  # the worker's warm simulator ends with the worker
+        atexit.register(models.simulators.close)
 
 
 def _fly(
@@ -103,10 +118,14 @@ def run_benchmark(
         with task_executor(config.parallel, config.ray, _init_worker, (config,)) as pool:
             if pool is None:
                 models = _load_models(config)
-                results = [
-                    _fly(mission, path, models, config.rerun)
-                    for mission, path in tqdm(runs, desc="missions", unit="mission")
-                ]
+                try:
+                    results = [
+                        _fly(mission, path, models, config.rerun)
+                        for mission, path in tqdm(runs, desc="missions", unit="mission")
+                    ]
+                finally:
+                    if models.simulators is not None:
+                        models.simulators.close()
             else:
                 futures = [pool.submit(_fly, m, p, None, config.rerun) for m, p in runs]
                 with tqdm(total=len(futures), desc="missions", unit="mission") as bar:

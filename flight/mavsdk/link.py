@@ -47,6 +47,11 @@ class MavsdkConfig:
     shown_url: str | None = None
     """The vehicle's URL as the user gave it, for messages, when MAVSDK listens behind a relay elsewhere."""
     clock: str = "wall"  # or "vehicle": the autopilot's clock (see the module docstring)
+    offboard_stream_period_s: float = 0.05
+    """`clock="vehicle"`, in offboard: waits send the last setpoint again every this many seconds of the
+    vehicle's clock. MAVSDK re-sends it at 20 Hz of wall time, which a vehicle k times faster than real
+    time sees at 20/k Hz (PX4 wants more than 2 Hz), and a lockstepped sim-vehicle advances only as
+    setpoints arrive: a stream on its own clock keeps both as at ×1."""
 
     def __post_init__(self) -> None:
         validate_connection_url(self.url)
@@ -56,6 +61,8 @@ class MavsdkConfig:
             raise ValueError(f"MavsdkConfig.expected_system_id must be 1..255, got {self.expected_system_id}")
         if not (self.link_timeout_s > 0 and self.arm_retry_period_s > 0 and self.poll_s > 0):
             raise ValueError("MavsdkConfig: link_timeout_s, arm_retry_period_s and poll_s must be > 0")
+        if not self.offboard_stream_period_s > 0:
+            raise ValueError("MavsdkConfig: offboard_stream_period_s must be > 0")
 
 
 COMMAND_ATTEMPTS = 3

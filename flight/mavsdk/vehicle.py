@@ -16,7 +16,8 @@ Written for real PX4 (SITL or hardware) as much as for `dronectl sim-vehicle`:
   (the per-run identity of a vehicle the caller launched) and refuse any other;
 - `clock="vehicle"`: `time_s()`/`sleep()` follow the autopilot's own clock (the
   `time_boot_ms` of its ATTITUDE stream) instead of the wall clock, for a simulated
-  autopilot running faster or slower than real time in lockstep (PX4 SITL).
+  autopilot running faster or slower than real time in lockstep (PX4 SITL); in offboard
+  a wait then also streams the last setpoint on that clock (`offboard_stream_period_s`).
 
 MAVSDK's sync callbacks all run on one MAVSDK thread, and blocking calls return
 through it: the callbacks here only store values under a lock.
@@ -24,6 +25,7 @@ through it: the callbacks here only store values under a lock.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
@@ -190,9 +192,23 @@ class MavsdkVehicle(Vehicle):
             time.sleep(max(0.0, seconds))
             return
         until = self.time_s() + seconds
-        while self.time_s() < until:
+        next_setpoint_s = self.time_s() + self.config.offboard_stream_period_s
+        while (now_s := self.time_s()) < until:
             self._cache.link.check("sleep()")  # a frozen vehicle clock ends here, as a lost link
+            if self._in_offboard and now_s >= next_setpoint_s and self._offboard is not None:
+                next_setpoint_s = now_s + self.config.offboard_stream_period_s
+                self._stream_setpoint()
             time.sleep(0.002)
+
+    def _stream_setpoint(self) -> None:
+        """The last setpoint again, on the vehicle's clock (`MavsdkConfig.offboard_stream_period_s`);
+        a refusal here is left to the next command, which reports it."""
+        assert self._offboard is not None
+        v = self._last_setpoint
+        with contextlib.suppress(OffboardError):
+            self._offboard.set_velocity_body(
+                VelocityBodyYawspeed(v.forward_m_s, v.right_m_s, v.down_m_s, v.yawspeed_deg_s)
+            )
 
     def _wait(
         self, predicate: Callable[[Telemetry], bool], timeout_s: float, origin: str, what: str
@@ -404,6 +420,14 @@ class MavsdkVehicle(Vehicle):
                     origin, mode.name, f"{observed.name} ({self._last_text()!r})", timeout_s
                 )
             self.sleep(self.config.poll_s)
+
+    def new_flight(self) -> None:
+        """Forget what the last flight left (offboard, its setpoint, the ground height) for a vehicle
+        reset beneath this connection (a simulator kept warm between missions)."""
+        self._in_offboard = False
+        self._setpoint_set = False
+        self._last_setpoint = VelocityBody()
+        self._ground_down_m = math.nan
 
     # --- diagnostics and teardown -------------------------------------------------------------
     def command_round_trip_s(self) -> float:

@@ -202,6 +202,12 @@ def build_parser(prog: str = "dronectl benchmark-missions", description: str | N
         help="worker processes, or the local Ray's CPUs (default: 1)",
     )
     add_ray_option(parser)
+    parser.add_argument(
+        "--fresh",
+        action="store_true",
+        help="sim-mavlink: a fresh simulator for every mission (default: each worker keeps one warm and "
+        "resets it to the next mission's world)",
+    )
     parser.add_argument("--json", type=new_file, help="write the summary and every mission's row here")
     parser.add_argument(
         "--report", type=Path, help="keep each mission's report.json under this folder (new or empty)"
@@ -222,7 +228,7 @@ def benchmark_config(args: argparse.Namespace, parser: CommandParser) -> Benchma
             base=base_mission(args),
             n=args.n, seed=args.seed, planners=tuple(p.strip() for p in args.planner.split(",") if p.strip()),
             parallel=args.parallel, rerun=args.rerun, ray=args.ray, instructions=args.instructions,
-            absent=args.absent,
+            absent=args.absent, warm=not args.fresh,
         )  # fmt: skip
     except (Px4FolderError, ArduPilotFolderError) as exc:
         print(f"{parser.prog}: {exc}", file=sys.stderr)

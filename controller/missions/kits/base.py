@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from controller.missions.schema import Mission
 from controller.planning.grounding import TargetQuery
@@ -21,6 +21,9 @@ from controller.planning.planners import Planner, make_planner
 from flight.vehicle import Vehicle
 from perception.camera import Camera
 from perception.detector import Detector
+
+if TYPE_CHECKING:  # kits.warm imports MAVSDK: a kit that keeps nothing warm never loads it
+    from controller.missions.kits.warm import WarmSimulators
 
 TLOG_NAME = "flight.tlog"
 
@@ -98,7 +101,8 @@ def named_target(mission: Mission, targets: list[tuple[str, str]]) -> tuple[str,
 
 @dataclass
 class LoadedModels:
-    """Models loaded once and shared by many missions in one process (benchmarks, suites).
+    """Models loaded once and shared by many missions in one process (benchmarks, suites), and the
+    simulator kept warm between them.
 
     A mission that asks for the default image detector or the latent planner with
     this checkpoint uses these instead of loading its own.
@@ -107,6 +111,9 @@ class LoadedModels:
     detector: Detector | None = None
     latent: Planner | None = None
     latent_checkpoint: str | None = None
+    simulators: WarmSimulators | None = None
+    """A simulated MAVLink vehicle kept warm between the process's missions (`kits.warm`); None: each
+    mission starts its own."""
 
 
 def models_detector(mission: Mission, models: LoadedModels | None) -> Detector | None:
