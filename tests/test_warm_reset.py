@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from px4_helpers import PX4_DIR, requires_px4
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -26,6 +27,8 @@ from controller.benchmarks.missions import run_benchmark
 from drone_inspect_core.world_options import StartPose
 from flight.relay import MavlinkRelay
 from flight.sim_launcher import SimulatorProcess, SimulatorResetError
+from sim_world.sitl.frame import AutopilotFrame
+from sim_world.sitl.imu import Truth
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.serve import READY_PREFIX, RESET_PREFIX, SimVehicleRun, build_world
 
@@ -138,3 +141,39 @@ def test_a_warm_sim_vehicle_starts_every_seed_where_a_fresh_one_does(tmp_path: P
         assert np.abs(np.subtract(first_warm, first_fresh)).max() < 3.0, (name, first_warm, first_fresh)
     second = list(reports[True].values())[1]
     assert second["phases_wall_s"]["ready"] < 0.5  # a warm autopilot has booted: ready at once
+
+
+def _truth_at(position_ned: list[float], yaw_rad: float, time_s: float) -> Truth:
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    zero = np.zeros(3)
+    return Truth(time_s, np.array(position_ned, float), zero, zero, rotation, zero)
+
+
+def test_an_autopilot_sees_the_new_world_start_where_it_last_saw_the_drone() -> None:
+    last = _truth_at([3.0, -1.5, -0.01], np.radians(40.0), 61.2)  # where PX4 saw it land (its frame)
+    start = _truth_at([0.0, 0.0, 0.0], np.radians(-8.0), 0.0)  # the new world's start (its own frame)
+    frame = AutopilotFrame.continuing(last, start, 61.204)
+    seen = frame.apply(start)
+    np.testing.assert_allclose(seen.position_ned_m, last.position_ned_m, atol=1e-12)
+    np.testing.assert_allclose(seen.rotation_ned_frd, last.rotation_ned_frd, atol=1e-12)
+    assert seen.time_s == pytest.approx(61.204)
+    # A move in the new world is the same move, turned, in the autopilot's: 1 m forward (its heading).
+    forward = _truth_at([np.cos(np.radians(-8.0)), np.sin(np.radians(-8.0)), 0.0], np.radians(-8.0), 1.0)
+    moved = frame.apply(forward).position_ned_m - seen.position_ned_m
+    np.testing.assert_allclose(moved, [np.cos(np.radians(40.0)), np.sin(np.radians(40.0)), 0.0], atol=1e-12)
+    assert AutopilotFrame().apply(start) is start  # a fresh autopilot's frame is the world's
+
+
+@requires_px4
+@pytest.mark.slow
+def test_a_warm_px4_flies_a_second_world_after_a_reset() -> None:
+    config = BenchmarkConfig.of(
+        {"vehicle": "px4-sitl", "px4": {"dir": str(PX4_DIR), "speed": "max", "keep_ulog": False}},
+        n=2, seed=4, planners=("latent",),
+    )  # fmt: skip
+    summary = run_benchmark(config)
+    missions = summary["missions"]
+    assert [m["info"]["warm_missions"] for m in missions] == [1, 2]  # one PX4, reset for the second
+    assert all(m["passed"] for m in missions), [m["failures"] for m in missions]
+    assert missions[1]["phases_s"]["ready"] < 0.5 and missions[1]["phases_s"]["start"] < 3.0

@@ -13,7 +13,7 @@ from sim_world.ardupilot_bridge.ardupilot_process import ArduPilotStartError
 from sim_world.ardupilot_bridge.bridge import ArduPilotRestartedError
 from sim_world.ardupilot_bridge.link import ArduPilotSilentError, PhysicsLinkError
 from sim_world.ardupilot_bridge.run import ArduPilotSimConfig, run_ardupilot_sim
-from sim_world.process_entry import say_ready, stop_on_signals
+from sim_world.process_entry import LauncherRequests, say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
 from sim_world.rendering.video import VideoError
 
@@ -22,7 +22,12 @@ log = logging.getLogger(__name__)
 READY_PREFIX = "ardupilot-sim ready: "
 
 
-def serve(config: ArduPilotSimConfig, out: TextIO, watch_parent: bool = False) -> int:
+def serve(
+    config: ArduPilotSimConfig,
+    out: TextIO,
+    watch_parent: bool = False,
+    requests: LauncherRequests | None = None,
+) -> int:
     """Run until SIGINT, SIGTERM, SIGHUP (or the parent's death, with `watch_parent`); an exit code.
 
     Prints one line `ardupilot-sim ready: {json}` to `out` once ArduPilot's first physics frame is

@@ -9,17 +9,20 @@ goes away. Everything is closed in reverse order on every way out.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
+from drone_inspect_core.config_files import from_json
 from drone_inspect_core.ports import free_port
+from drone_inspect_core.warm_reset import reset_config
 from drone_inspect_core.world_options import CameraFaults, StartPose, WindConfig
-from sim_world.process_entry import say_ready, stop_on_signals
+from sim_world.process_entry import LauncherRequests, say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
 from sim_world.px4_bridge.bridge import BridgeStats, BridgeTiming, CameraClock, Px4Bridge
 from sim_world.px4_bridge.geodesy import HomePoint, magnetic_field_ned_gauss
@@ -153,11 +156,19 @@ def run_px4_sim(
     config: Px4SimConfig,
     stop: threading.Event | None = None,
     on_ready: Callable[[Px4SimReady], None] | None = None,
+    requests: LauncherRequests | None = None,
+    on_reset: Callable[[Px4SimReady | None, str | None], None] | None = None,
 ) -> BridgeStats:
-    """Serve the world to PX4 until `stop`, `duration_s`, or PX4's exit (`Px4StartError` / disconnect)."""
+    """Serve the world to PX4 until `stop`, `duration_s`, or PX4's exit (`Px4StartError` / disconnect).
+
+    `requests`: the launcher's; a reset request (`drone_inspect_core.warm_reset`) puts a new world behind
+    the running PX4 (`Px4Bridge.rebase`, the video feed's `reset`), then `on_reset(ready, None)`, or
+    `on_reset(None, why)` when it could not (the old world flies on)."""
     stop = stop or threading.Event()
     world = build_px4_world(config)
-    with world:
+    worlds = [world]  # the one flown now is the last: each reset adds one and closes the one before
+    with contextlib.ExitStack() as closing:
+        closing.callback(lambda: worlds[-1].close())
         origin = world.state().position_enu_m.copy()
         field = magnetic_field_ned_gauss(
             config.home.latitude_deg,
@@ -208,19 +219,18 @@ def run_px4_sim(
                                 f"{px4.output_tail()}"
                             )
                         bridge.step()
+                    ready = Px4SimReady(
+                        mavlink_url=config.mavlink_url,
+                        system_id=config.system_id or config.instance + 1,
+                        video_url=None if video is None else video.stream_url,
+                        truth_url=None if video is None else video.truth_url,
+                        px4_pid=px4.pid,
+                        lockstep_after_s=world.time_s,
+                        simulator_tcp=server.address[1],
+                        px4_mavlink_udp=None if options.ports is None else options.ports.mavlink_udp,
+                    )
                     if on_ready is not None:
-                        on_ready(
-                            Px4SimReady(
-                                mavlink_url=config.mavlink_url,
-                                system_id=config.system_id or config.instance + 1,
-                                video_url=None if video is None else video.stream_url,
-                                truth_url=None if video is None else video.truth_url,
-                                px4_pid=px4.pid,
-                                lockstep_after_s=world.time_s,
-                                simulator_tcp=server.address[1],
-                                px4_mavlink_udp=None if options.ports is None else options.ports.mavlink_udp,
-                            )
-                        )
+                        on_ready(ready)
                     if config.px4_dies_at_s is not None:
                         bridge.run(stop, max_sim_s=max(0.0, config.px4_dies_at_s - world.time_s))
                         if not stop.is_set():
@@ -231,10 +241,54 @@ def run_px4_sim(
                     remaining = (
                         None if config.duration_s is None else max(0.0, config.duration_s - world.time_s)
                     )
-                    return bridge.run(stop, max_sim_s=remaining)
+                    current = [config]
+
+                    def between() -> None:
+                        request = requests.take() if requests is not None else None
+                        if request is None:
+                            return
+                        error = _reset(current, worlds, bridge, video, request)
+                        if on_reset is not None:
+                            on_reset(ready if error is None else None, error)
+
+                    return bridge.run(stop, max_sim_s=remaining, between=between if requests else None)
             finally:
                 if video is not None:
                     video.close()
+
+
+WORLD_FIELDS = ("scene", "seed", "start_offset", "wind", "video_faults")
+"""What a reset may change: the world. PX4's process, ports, parameters and sensors stay."""
+
+
+def _reset(
+    current: list[Px4SimConfig],
+    worlds: list[World],
+    bridge: Px4Bridge,
+    video: WorldVideoFeed | None,
+    request: dict[str, Any],
+) -> str | None:
+    """Fly the world a reset request asks for from the next tick (`current` and `worlds` updated); why
+    not, if it cannot be (the old world flies on)."""
+    try:
+        data = reset_config(request)
+        if data is None:
+            raise ValueError(f"not a request this simulator knows: {sorted(request)}")
+        config = from_json(Px4SimConfig, data)
+        if replace(config, **{name: getattr(current[0], name) for name in WORLD_FIELDS}) != current[0]:
+            raise ValueError(f"a reset may change the world ({', '.join(WORLD_FIELDS)}), not PX4's setup")
+        world = build_px4_world(config)
+    except (ValueError, KeyError, TypeError) as exc:
+        return f"bad reset request: {exc}"
+    origin = world.state().position_enu_m.copy()
+    bridge.rebase(world, origin)
+    worlds[-1].close()
+    worlds.append(world)
+    current[0] = config
+    if video is not None:
+        video.reset(world, origin, config.video_faults)  # VideoError: the process ends, its launcher sees why
+    log.info("reset: a new world (seed %d) behind PX4, its frame %s", config.seed, bridge.frame)
+    return None
 
 
 def _px4_ports(config: Px4SimConfig, server: SimulatorServer) -> Px4Ports | None:
@@ -265,7 +319,13 @@ def _accept(server: SimulatorServer, px4: Px4Process, timeout_s: float) -> None:
 READY_PREFIX = "px4-sim ready: "
 
 
-def serve(config: Px4SimConfig, out: TextIO, watch_parent: bool = False) -> int:
+RESET_PREFIX = "px4-sim reset: "
+"""A warm simulator's answer to a reset: the ready facts, or `{"error": ...}`."""
+
+
+def serve(
+    config: Px4SimConfig, out: TextIO, watch_parent: bool = False, requests: LauncherRequests | None = None
+) -> int:
     """Run until SIGINT, SIGTERM, SIGHUP (or the parent's death, with `watch_parent`); an exit code.
 
     Prints one line `px4-sim ready: {json}` to `out` once PX4 answers in lockstep (URLs,
@@ -276,7 +336,15 @@ def serve(config: Px4SimConfig, out: TextIO, watch_parent: bool = False) -> int:
     if watch_parent:
         parent_watch(stop, "px4-sim")
     try:
-        stats = run_px4_sim(config, stop, on_ready=lambda info: say_ready(out, READY_PREFIX, info))
+        stats = run_px4_sim(
+            config,
+            stop,
+            on_ready=lambda info: say_ready(out, READY_PREFIX, info),
+            requests=requests,
+            on_reset=lambda info, error: say_ready(
+                out, RESET_PREFIX, info if error is None else {"error": error}
+            ),
+        )
     except (Px4StartError, Px4DisconnectedError, SimulatorLinkError, VideoError, OSError) as exc:
         log.error("px4-sim: %s", exc)
         out.write(f"px4-sim failed: {exc}\n")

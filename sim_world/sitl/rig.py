@@ -113,6 +113,10 @@ class CameraClock:
         self._next_s = 0.0
         self.frames = 0
 
+    def restart(self) -> None:
+        """A new world's clock (from 0): the next tick captures."""
+        self._next_s = 0.0
+
     def tick(self, sim_s: float) -> None:
         if sim_s + 1e-9 >= self._next_s:
             self._capture()

@@ -17,7 +17,6 @@ a little wider than the controller's (`vehicle_limits_for`), whatever a client a
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import asdict
@@ -33,10 +32,9 @@ from controller.missions.kits.simulated import (
     simulated_world_fields,
     vehicle_limits_for,
 )
-from controller.missions.kits.warm import WarmSimulator, WarmSimulators
+from controller.missions.kits.warm import WarmSimulator, WarmSimulators, warm_key
 from controller.missions.schema import Mission
 from controller.missions.setup import scene_config_for, start_offset_for
-from drone_inspect_core.config_files import to_json
 from drone_inspect_core.ports import check_free, free_port
 from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.vehicle_limits import VehicleLimits
@@ -93,33 +91,6 @@ def open_sim_mavlink_kit(
     warm = models.simulators if models is not None else None
     with open_sim_mavlink(mission, out_dir, limits, warm) as sim:
         yield simulated_mavlink_kit(mission, models, sim)
-
-
-def warm_key(mission: Mission, limits: SafetyLimits | None) -> str | None:
-    """What a warm sim-vehicle must share with `mission` to fly it after a reset (its process, ports,
-    link and limits); None for a mission that fixes its ports, or injects a fault at a simulated time
-    (a death, a frozen or dying camera: a warm vehicle, booted long ago, would meet it at another
-    moment of the flight than a fresh one)."""
-    faults, camera = mission.faults, mission.faults.camera_faults()
-    timed_camera_fault = camera is not None and (
-        camera.freeze_at_s is not None or camera.dies_at_s is not None
-    )
-    if (
-        faults.vehicle_dies_at_s is not None
-        or timed_camera_fault
-        or mission.ports.mavlink_udp != "auto"
-        or mission.ports.http != "auto"
-    ):
-        return None
-    return json.dumps(
-        {
-            "vehicle": mission.vehicle,
-            "speed": mission.sim_speed,
-            "link_faults": to_json(faults.link_faults()),
-            "limits": asdict(vehicle_limits_for(limits)),
-        },
-        sort_keys=True,
-    )
 
 
 @contextmanager

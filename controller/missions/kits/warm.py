@@ -17,18 +17,23 @@ apart from the world share one (`WarmSimulators.use`'s key: vehicle, speed, port
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from controller.missions.kits.base import TLOG_NAME
+from controller.missions.kits.simulated import vehicle_limits_for
+from controller.missions.schema import ARDUPILOT_SITL, PX4_SITL, SIM_MAVLINK, Mission
+from drone_inspect_core.config_files import to_json
 from flight.errors import FlightError
 from flight.mavsdk.vehicle import MavsdkVehicle
 from flight.relay import MavlinkRelay
+from flight.safety import SafetyLimits
 from flight.sim_launcher import SimulatorProcess, SimulatorStartError
 from perception.stream_camera import StreamCamera
 
@@ -84,6 +89,38 @@ def wait_for_fresh_telemetry(vehicle: MavsdkVehicle) -> None:
             )
         time.sleep(0.002)
     vehicle.telemetry()  # a lost link says so here
+
+
+def warm_key(mission: Mission, limits: SafetyLimits | None) -> str | None:
+    """What a warm simulator must share with `mission` to fly it after a reset: its kind, its process's
+    setup (speed, ports; a SITL's folder, instance, parameters, noise), the link's faults and the
+    vehicle's own limits. None for a mission that cannot share one: fixed ports, flight logs kept in its
+    report folder, or a fault injected at a simulated time (a death, a frozen or dying camera: a warm
+    autopilot, booted long ago, would meet it at another moment of the flight than a fresh one)."""
+    faults, camera = mission.faults, mission.faults.camera_faults()
+    if faults.vehicle_dies_at_s is not None or (
+        camera is not None and (camera.freeze_at_s is not None or camera.dies_at_s is not None)
+    ):
+        return None
+    if mission.vehicle == SIM_MAVLINK:
+        if mission.ports.mavlink_udp != "auto" or mission.ports.http != "auto":
+            return None
+        setup: dict[str, Any] = {"speed": mission.sim_speed}
+    elif mission.vehicle == PX4_SITL and not mission.px4.keep_ulog:
+        setup = mission.px4.model_dump(mode="json")
+    elif mission.vehicle == ARDUPILOT_SITL and not mission.ardupilot.keep_logs:
+        setup = mission.ardupilot.model_dump(mode="json")
+    else:
+        return None
+    return json.dumps(
+        {
+            "vehicle": mission.vehicle,
+            "setup": setup,
+            "link_faults": to_json(faults.link_faults()),
+            "limits": asdict(vehicle_limits_for(limits)),
+        },
+        sort_keys=True,
+    )
 
 
 class WarmSimulators:
