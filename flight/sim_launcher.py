@@ -8,8 +8,9 @@ are added there and nowhere else: the copy of the config kept beside the log lea
 prints one line `<prefix>{json}` when it is ready; `start()` waits for that line (or for the child's
 exit, reported with the end of its output) and `ready` holds the JSON.
 
-A simulator kept warm between missions (given a `reset_prefix`) keeps that pipe open: `reset(config,
-log_path)` sends it a new world on one line (`drone_inspect_core.warm_reset`), waits for its answer
+A lockstepped simulator paced by its client (`paced=True`) keeps that pipe open for `pace()`, and one
+kept warm between missions (given a `reset_prefix`) for resets: `reset(config,
+log_path)` sends it a new world on one line (`drone_inspect_core.launcher_requests`), waits for its answer
 line (`<reset_prefix>{json}`: the new world is built, or why not) and copies its output to the new
 log from then on; the process, its ports and its autopilot stay.
 
@@ -41,7 +42,7 @@ from typing import Any
 
 from drone_inspect_core.config_files import to_json
 from drone_inspect_core.files import still_there, write_json_atomic
-from drone_inspect_core.warm_reset import reset_line
+from drone_inspect_core.launcher_requests import PACE_LINE, reset_line
 
 log = logging.getLogger(__name__)
 
@@ -69,9 +70,10 @@ class SimulatorProcess:
         name: str = "simulator",
         secrets: dict[str, Any] | None = None,
         reset_prefix: str | None = None,
+        paced: bool = False,
     ) -> None:
         """`reset_prefix`: the child's answer to a reset request; given, the child is kept resettable
-        (its stdin stays open for `reset()`)."""
+        (its stdin stays open for `reset()`). `paced`: its stdin stays open for `pace()` too."""
         self.module, self.log_path = module, Path(log_path)
         self.config: dict[str, Any] = to_json(config)
         """The child's config as JSON (`drone_inspect_core.config_files.to_json` of a config object), kept
@@ -87,6 +89,8 @@ class SimulatorProcess:
         self._ready_line = threading.Event()
         self._reader: threading.Thread | None = None
         self.reset_prefix = reset_prefix
+        self._keep_stdin = reset_prefix is not None or paced
+        self._stdin_lock = threading.Lock()
         self._reset_answer: dict[str, Any] | None = None
         self._reset_done = threading.Event()
         self._log_lock = threading.Lock()
@@ -112,7 +116,7 @@ class SimulatorProcess:
             assert self._process.stdin is not None
             self._process.stdin.write(json.dumps({**self.config, **self._secrets}).encode() + b"\n")
             self._process.stdin.flush()
-            if self.reset_prefix is None:
+            if not self._keep_stdin:
                 self._process.stdin.close()
             self._wait_ready()
         except BaseException:
@@ -211,8 +215,7 @@ class SimulatorProcess:
         with self._log_lock:
             self._next_log = Path(log_path)
         try:
-            process.stdin.write(reset_line(self.config))
-            process.stdin.flush()
+            self._send(reset_line(self.config))
         except OSError as exc:
             raise SimulatorResetError(f"{self.name}: cannot send the reset: {exc}") from exc
         deadline = time.monotonic() + timeout_s
@@ -229,6 +232,21 @@ class SimulatorProcess:
             raise SimulatorResetError(f"{self.name} could not reset: {answer['error']}")
         self.ready = answer
         return answer
+
+    def pace(self) -> None:
+        """Tell a lockstepped child (`paced=True`) that its client waits on the vehicle's clock, so it may
+        run on (`sim_world.sitl.rig.LockstepPace`); a child gone or not paced: nothing."""
+        if self._keep_stdin:
+            with contextlib.suppress(OSError, ValueError):
+                self._send(PACE_LINE)
+
+    def _send(self, line: bytes) -> None:
+        process = self._process
+        if process is None or process.stdin is None:
+            raise OSError("the simulator has no open stdin")
+        with self._stdin_lock:
+            process.stdin.write(line)
+            process.stdin.flush()
 
     def output(self) -> str:
         """The last lines the child printed (also in `log_path` while that can be written)."""

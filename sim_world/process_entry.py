@@ -10,7 +10,7 @@ A simulator (`sim-vehicle`, the PX4 bridge) runs either from a person's terminal
   however the parent died (SIGKILL included): the parent is polled every 0.5 s, and a
   stop that hangs for 10 s ends the process hard;
 - it prints one line `<prefix>{json}` when it is ready, which launchers wait for;
-- a launcher's later lines on its stdin (a warm simulator's resets, `drone_inspect_core.warm_reset`)
+- a launcher's later lines on its stdin (a warm simulator's resets, `drone_inspect_core.launcher_requests`)
   are `LauncherRequests`, which the serving loop takes between its other work.
 """
 
@@ -28,6 +28,8 @@ from collections.abc import Callable
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
 from typing import Any, TextIO
+
+from drone_inspect_core.launcher_requests import is_pace
 
 log = logging.getLogger(__name__)
 
@@ -72,14 +74,18 @@ def say_ready(out: TextIO, prefix: str, info: Any) -> None:
 
 
 class LauncherRequests:
-    """The launcher's requests after the config, one JSON object a line on `stream` (the child's stdin),
-    read by a daemon thread until the stream ends (a launcher that keeps no simulator warm closes it at
-    once); `take()` hands the serving loop the next one, never blocking. A line that is not a JSON
-    object is said and dropped."""
+    """The launcher's requests after the config, one JSON object a line on `stream` (the child's stdin,
+    `drone_inspect_core.launcher_requests`), read by a daemon thread until the stream ends (a launcher
+    that asks nothing closes it at once); `take()` hands the serving loop the next one, never blocking.
+    Pace requests are not queued: each counts in `paces` (when, `paced_at`, monotonic) and sets `paced`.
+    A line that is not a JSON object is said and dropped."""
 
     def __init__(self, stream: TextIO, name: str) -> None:
         self._queue: queue.Queue[dict[str, Any]] = queue.Queue()
         self._name = name
+        self.paces = 0
+        self.paced_at = 0.0
+        self.paced = threading.Event()
         threading.Thread(target=self._read, args=(stream,), name="launcher-requests", daemon=True).start()
 
     def _read(self, stream: TextIO) -> None:
@@ -90,7 +96,11 @@ class LauncherRequests:
                 request = json.loads(line)
             except ValueError:
                 request = None
-            if isinstance(request, dict):
+            if isinstance(request, dict) and is_pace(request):
+                self.paced_at = time.monotonic()
+                self.paces += 1
+                self.paced.set()
+            elif isinstance(request, dict):
                 self._queue.put(request)
             else:
                 log.error("%s: not a JSON object from the launcher: %.80r", self._name, line)

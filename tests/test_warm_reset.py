@@ -105,6 +105,9 @@ def test_a_kept_relay_records_each_mission_in_its_own_tlog(tmp_path: Path) -> No
         target = ("127.0.0.1", relay.listen_address[1])
         vehicle.sendto(heartbeat, target)
         client.recvfrom(65535)
+        deadline = time.monotonic() + 2.0
+        while relay.messages_logged < 1 and time.monotonic() < deadline:  # logged just after it is sent
+            time.sleep(0.01)
         relay.record_to(tmp_path / "two" / "flight.tlog")
         vehicle.sendto(attitude, target)
         client.recvfrom(65535)

@@ -31,7 +31,7 @@ from controller.benchmarks.mission_plan import ABSENT_TAG, BenchmarkConfig, benc
 from controller.missions.kits.base import LoadedModels
 from controller.missions.report import REPORT_JSON, claim_report_dir
 from controller.missions.results import MissionResult
-from controller.missions.schema import PX4_SITL, SIM_MAVLINK, Mission, parse_mission
+from controller.missions.schema import ARDUPILOT_SITL, PX4_SITL, SIM_MAVLINK, Mission, parse_mission
 from controller.missions.suite import failed_to_start
 from drone_inspect_core.files import release_claim
 from drone_inspect_core.parallel import gather, task_executor
@@ -62,7 +62,7 @@ def _load_models(config: BenchmarkConfig) -> LoadedModels:
     )
 
 
-WARM_VEHICLES = (SIM_MAVLINK, PX4_SITL)
+WARM_VEHICLES = (SIM_MAVLINK, PX4_SITL, ARDUPILOT_SITL)
 """The simulated vehicles a benchmark keeps warm between missions (`BenchmarkConfig.warm`)."""
 
 MISSION_RRD = "mission.rrd"

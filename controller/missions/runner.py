@@ -97,8 +97,19 @@ def loop_config(
         max_steps=mission.max_steps,
         timeout_s=mission.timeout_s,
         stop_margin_px=mission.stop_margin_px,
-        **({"fresh_frame_s": FAST_SIM_FRESH_FRAME_S} if mission.sim_speed != 1.0 else {}),
+        **({"fresh_frame_s": FAST_SIM_FRESH_FRAME_S} if off_real_time(mission) else {}),
     )
+
+
+def off_real_time(mission: Mission) -> bool:
+    """Whether the mission's simulator runs off real time (sim-mavlink's `sim_speed`, a SITL's `speed`):
+    its camera's frames then lag the vehicle by more than at ×1, on the vehicle's clock."""
+    speeds = {
+        SIM_MAVLINK: mission.sim_speed,
+        PX4_SITL: mission.px4.speed,
+        ARDUPILOT_SITL: mission.ardupilot.speed,
+    }
+    return speeds.get(mission.vehicle, 1.0) != 1.0
 
 
 def fly_kit(

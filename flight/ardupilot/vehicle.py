@@ -62,6 +62,8 @@ _VELOCITY_YAWRATE_MASK = 0b0000_0101_1100_0111  # 1479: use velocity and yaw rat
 READY_REPORT_EVERY_S = 5.0
 DISARM_RACE_WAIT_S = 3.0
 FORCE_DISARM = 21196.0
+PACE_EVERY_S = 0.05
+"""How often (the vehicle's clock) a wait calls the pacer, well inside a paced simulator's lead (0.1 s)."""
 
 
 class ArduPilotVehicle(Vehicle):
@@ -69,8 +71,15 @@ class ArduPilotVehicle(Vehicle):
 
     realtime = True
 
-    def __init__(self, config: ArduPilotConfig | None = None) -> None:
+    def __init__(
+        self, config: ArduPilotConfig | None = None, pacer: Callable[[], None] | None = None
+    ) -> None:
+        """`pacer`: on the vehicle's clock, called while a wait is under way, every `PACE_EVERY_S` of that
+        clock: a lockstepped simulator paced by its client runs only while the client waits
+        (`flight.sim_launcher.SimulatorProcess.pace`)."""
         self.config = config or ArduPilotConfig()
+        self._pacer = pacer
+        self._paced_s = -math.inf
         self.state = ArduPilotState()
         self.setpoints_sent = 0
         self._link: MavlinkLink | None = None
@@ -178,6 +187,13 @@ class ArduPilotVehicle(Vehicle):
             except Exception:  # the thread must not die silently while the vehicle flies
                 log.exception("ArduPilot service tick failed")
 
+    def new_flight(self) -> None:
+        """Forget what the last flight left (GUIDED setpoints, the ground height) for a vehicle reset
+        beneath this connection (a simulator kept warm between missions)."""
+        self._offboard = False
+        self._setpoint, self._setpoint_set = VelocityBody(), False
+        self._ground_down_m = math.nan
+
     # --- telemetry and clock ------------------------------------------------------------------
     def telemetry(self) -> Telemetry:
         self._require_link("telemetry()").monitor.check("telemetry()")
@@ -200,8 +216,11 @@ class ArduPilotVehicle(Vehicle):
             time.sleep(max(0.0, seconds))
             return
         until = self.time_s() + seconds
-        while self.time_s() < until:
+        while (now_s := self.time_s()) < until:
             self._require_link("sleep()").monitor.check("sleep()")  # a frozen clock ends here, as a lost link
+            if self._pacer is not None and now_s - self._paced_s >= PACE_EVERY_S:
+                self._paced_s = now_s
+                self._pacer()
             time.sleep(0.002)
 
     def _wait(

@@ -65,10 +65,20 @@ class MavsdkVehicle(Vehicle):
 
     realtime = True
 
-    def __init__(self, config: MavsdkConfig | None = None, link: Closable | None = None) -> None:
-        """`link`: what carries the connection and goes with it (a relay in front of MAVSDK), closed last."""
+    def __init__(
+        self,
+        config: MavsdkConfig | None = None,
+        link: Closable | None = None,
+        pacer: Callable[[], None] | None = None,
+    ) -> None:
+        """`link`: what carries the connection and goes with it (a relay in front of MAVSDK), closed last.
+        `pacer`: on the vehicle's clock, called while a wait is under way, every `offboard_stream_period_s`
+        of that clock: a lockstepped simulator paced by its client runs only while the client waits
+        (`flight.sim_launcher.SimulatorProcess.pace`)."""
         self.config = config or MavsdkConfig()
         self._link = link
+        self._pacer = pacer
+        self._paced_s = -math.inf
         self.setpoints_sent = 0
         self._cache = TelemetryCache(self.config.link_timeout_s)
         self._texts_at_offboard = 0  # the STATUSTEXT count when offboard was confirmed
@@ -195,6 +205,9 @@ class MavsdkVehicle(Vehicle):
         next_setpoint_s = self.time_s() + self.config.offboard_stream_period_s
         while (now_s := self.time_s()) < until:
             self._cache.link.check("sleep()")  # a frozen vehicle clock ends here, as a lost link
+            if self._pacer is not None and now_s - self._paced_s >= self.config.offboard_stream_period_s:
+                self._paced_s = now_s
+                self._pacer()
             if self._in_offboard and now_s >= next_setpoint_s and self._offboard is not None:
                 next_setpoint_s = now_s + self.config.offboard_stream_period_s
                 self._stream_setpoint()

@@ -20,6 +20,8 @@ from sim_world.rendering.video import VideoError
 log = logging.getLogger(__name__)
 
 READY_PREFIX = "ardupilot-sim ready: "
+RESET_PREFIX = "ardupilot-sim reset: "
+"""A warm simulator's answer to a reset: the ready facts, or `{"error": ...}`."""
 
 
 def serve(
@@ -38,7 +40,13 @@ def serve(
     if watch_parent:
         parent_watch(stop, "ardupilot-sim")
     try:
-        stats = run_ardupilot_sim(config, stop, on_ready=lambda info: say_ready(out, READY_PREFIX, info))
+        stats = run_ardupilot_sim(
+            config,
+            stop,
+            on_ready=lambda info: say_ready(out, READY_PREFIX, info),
+            requests=requests,
+            on_reset=lambda info, error: say_ready(out, RESET_PREFIX, {"error": error} if error else info),
+        )
     except (ArduPilotStartError, ArduPilotSilentError, ArduPilotRestartedError, PhysicsLinkError, VideoError,
             OSError) as exc:  # fmt: skip
         log.error("ardupilot-sim: %s", exc)

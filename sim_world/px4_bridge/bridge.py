@@ -37,14 +37,12 @@ from sim_world.px4_bridge.link import Px4DisconnectedError, SimulatorServer
 from sim_world.px4_bridge.messages import ActuatorCommand, HilEncoder, RotorMapping
 from sim_world.px4_bridge.sensors import SensorSuite, Truth
 from sim_world.sitl.frame import AutopilotFrame
-from sim_world.sitl.rig import CameraClock, TruthReader
+from sim_world.sitl.rig import CameraClock, LockstepPace, TruthReader, continue_in, run_lockstep
 from sim_world.vehicle.telemetry import distance_sensor_message
 from sim_world.world import World
 
 log = logging.getLogger(__name__)
 
-BETWEEN_S = 0.02
-"""How often (wall) `Px4Bridge.run` lets its caller in between two ticks."""
 PX4_CLOCK_OFFSET_US = 20_000_000
 """PX4's clock = simulated time + 20 s. Started near 0, PX4's first integrated IMU sample spans
 everything since 0 and EKF2 began with ~1.8 m/s of vertical velocity on a vehicle at rest
@@ -150,15 +148,12 @@ class Px4Bridge:
     def rebase(self, world: World, origin_enu_m: np.ndarray) -> None:
         """Fly `world` (a fresh build, the drone landed and still) from the next tick on, shown to PX4 as
         the continuation of what it last saw (`AutopilotFrame.continuing`); the old world is the caller's."""
-        if self.last_truth is None:
-            raise RuntimeError("Px4Bridge.rebase() before PX4 was told anything")
-        reader = TruthReader(world, origin_enu_m, self.timing.sensor_period_s)
-        next_time_s = (self._time_usec - PX4_CLOCK_OFFSET_US) / 1e6 + self.timing.sensor_period_s
-        self.frame = AutopilotFrame.continuing(self.last_truth, reader.read(), next_time_s)
+        period_s = self.timing.sensor_period_s
+        next_time_s = (self._time_usec - PX4_CLOCK_OFFSET_US) / 1e6 + period_s
+        reader, self.frame = continue_in(
+            world, origin_enu_m, period_s, self.last_truth, next_time_s, self.camera
+        )
         self.world, self.origin_enu_m, self._truth_reader = world, origin_enu_m, reader
-        world.drone.stop_rotors()
-        if self.camera is not None:
-            self.camera.restart()
 
     # --------------------------------------------------------------------- loop
     def run(
@@ -166,30 +161,20 @@ class Px4Bridge:
         stop: threading.Event,
         max_sim_s: float | None = None,
         between: Callable[[], None] | None = None,
+        pace: LockstepPace | None = None,
     ) -> BridgeStats:
         """Lockstep until `stop`, `max_sim_s` of simulated time, or PX4 disconnects (re-raised);
-        `between()` every `BETWEEN_S` of wall time, between two ticks (a warm simulator's resets)."""
-        timing = self.timing
-        wall0 = next_between = time.monotonic()
-        sim0 = self.world.time_s
-        self._last_heard = wall0
-        while not stop.is_set():
-            if max_sim_s is not None and self.world.time_s - sim0 >= max_sim_s:
-                break
-            if between is not None and time.monotonic() >= next_between:
-                world = self.world
-                between()
-                next_between = time.monotonic() + BETWEEN_S
-                if self.world is not world:  # a new world: its own clock
-                    sim0, wall0 = self.world.time_s, time.monotonic()
-            self.step()
-            if timing.speed is not None:
-                ahead_s = (self.world.time_s - sim0) / timing.speed - (time.monotonic() - wall0)
-                if ahead_s > 0.001:
-                    time.sleep(ahead_s)
-            with self._stats_lock:
-                self._stats.wall_s = time.monotonic() - wall0
+        `between()` between two ticks, every `rig.BETWEEN_S` of wall time (a warm simulator's resets);
+        `pace`: the client holds the world too (`rig.LockstepPace`)."""
+        self._last_heard = time.monotonic()
+        run_lockstep(
+            lambda: self.world, self.step, stop, self.timing.speed, max_sim_s, between, self._wall, pace
+        )
         return self.stats()
+
+    def _wall(self, seconds: float) -> None:
+        with self._stats_lock:
+            self._stats.wall_s = seconds
 
     def step(self) -> None:
         """One sensor period: sensors out, PX4's answer in, physics one tick."""

@@ -14,13 +14,11 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TextIO
 
-from drone_inspect_core.config_files import from_json
 from drone_inspect_core.ports import free_port
-from drone_inspect_core.warm_reset import reset_config
 from drone_inspect_core.world_options import CameraFaults, StartPose, WindConfig
 from sim_world.process_entry import LauncherRequests, say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
@@ -43,7 +41,8 @@ from sim_world.px4_bridge.px4_process import (
 from sim_world.px4_bridge.sensors import SensorNoise, SensorSuite
 from sim_world.rendering.video import VideoConfig, VideoError, WorldVideoFeed
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfig
-from sim_world.sitl.rig import SITL_QUAD, build_sitl_world
+from sim_world.sitl.resets import SitlResets
+from sim_world.sitl.rig import SITL_QUAD, LockstepPace, build_sitl_world
 from sim_world.world import World, derived_seed
 
 log = logging.getLogger(__name__)
@@ -161,14 +160,13 @@ def run_px4_sim(
 ) -> BridgeStats:
     """Serve the world to PX4 until `stop`, `duration_s`, or PX4's exit (`Px4StartError` / disconnect).
 
-    `requests`: the launcher's; a reset request (`drone_inspect_core.warm_reset`) puts a new world behind
+    `requests`: the launcher's (`drone_inspect_core.launcher_requests`); a reset puts a new world behind
     the running PX4 (`Px4Bridge.rebase`, the video feed's `reset`), then `on_reset(ready, None)`, or
     `on_reset(None, why)` when it could not (the old world flies on)."""
     stop = stop or threading.Event()
-    world = build_px4_world(config)
-    worlds = [world]  # the one flown now is the last: each reset adds one and closes the one before
-    with contextlib.ExitStack() as closing:
-        closing.callback(lambda: worlds[-1].close())
+    worlds = SitlResets(config, build_px4_world)  # the world flown now, and the resets that replace it
+    world = worlds.world
+    with contextlib.closing(worlds):
         origin = world.state().position_enu_m.copy()
         field = magnetic_field_ned_gauss(
             config.home.latitude_deg,
@@ -241,54 +239,23 @@ def run_px4_sim(
                     remaining = (
                         None if config.duration_s is None else max(0.0, config.duration_s - world.time_s)
                     )
-                    current = [config]
 
                     def between() -> None:
-                        request = requests.take() if requests is not None else None
-                        if request is None:
-                            return
-                        error = _reset(current, worlds, bridge, video, request)
-                        if on_reset is not None:
-                            on_reset(ready if error is None else None, error)
+                        assert requests is not None
+                        error = worlds.take(requests, bridge, video)
+                        if error is not False and on_reset is not None:
+                            on_reset(ready if error is None else None, error or None)
 
-                    return bridge.run(stop, max_sim_s=remaining, between=between if requests else None)
+                    paced = requests is not None and config.timing.speed is None
+                    return bridge.run(
+                        stop,
+                        max_sim_s=remaining,
+                        between=None if requests is None else between,
+                        pace=LockstepPace(requests) if paced and requests is not None else None,
+                    )
             finally:
                 if video is not None:
                     video.close()
-
-
-WORLD_FIELDS = ("scene", "seed", "start_offset", "wind", "video_faults")
-"""What a reset may change: the world. PX4's process, ports, parameters and sensors stay."""
-
-
-def _reset(
-    current: list[Px4SimConfig],
-    worlds: list[World],
-    bridge: Px4Bridge,
-    video: WorldVideoFeed | None,
-    request: dict[str, Any],
-) -> str | None:
-    """Fly the world a reset request asks for from the next tick (`current` and `worlds` updated); why
-    not, if it cannot be (the old world flies on)."""
-    try:
-        data = reset_config(request)
-        if data is None:
-            raise ValueError(f"not a request this simulator knows: {sorted(request)}")
-        config = from_json(Px4SimConfig, data)
-        if replace(config, **{name: getattr(current[0], name) for name in WORLD_FIELDS}) != current[0]:
-            raise ValueError(f"a reset may change the world ({', '.join(WORLD_FIELDS)}), not PX4's setup")
-        world = build_px4_world(config)
-    except (ValueError, KeyError, TypeError) as exc:
-        return f"bad reset request: {exc}"
-    origin = world.state().position_enu_m.copy()
-    bridge.rebase(world, origin)
-    worlds[-1].close()
-    worlds.append(world)
-    current[0] = config
-    if video is not None:
-        video.reset(world, origin, config.video_faults)  # VideoError: the process ends, its launcher sees why
-    log.info("reset: a new world (seed %d) behind PX4, its frame %s", config.seed, bridge.frame)
-    return None
 
 
 def _px4_ports(config: Px4SimConfig, server: SimulatorServer) -> Px4Ports | None:

@@ -78,11 +78,12 @@ class VideoConfig:
     jpeg_quality: int = 85
     start_timeout_s: float = 60.0  # a fresh interpreter importing pybullet and building the scene
     clock: str = "wall"
-    """"wall": render the latest pose `fps` times per wall second (sim-vehicle, paced to the wall
-    clock); "sim": the caller captures a pose `fps` times per simulated second (the bridges, in
-    lockstep, faster or slower than real time) and the newest capture is rendered, at most `fps` times
-    per wall second: a stream's reader gets `fps` fresh frames a second on its own clock, as from a
-    camera, however fast the simulation runs, and the lockstep never waits for a render."""
+    """Where the poses come from: "wall", the vehicle loop's after each physics batch (sim-vehicle);
+    "sim", the caller's `capture()` `fps` times per simulated second (the bridges, in lockstep, faster
+    or slower than real time). Either way the latest pose is rendered `fps` times per wall second: a
+    stream's reader gets `fps` fresh frames a second on its own clock, as from a camera, however fast
+    the simulation runs or while it stands still (a lockstep waiting for its client), and the
+    simulation never waits for a render."""
     faults: CameraFaults | None = None
 
     def __post_init__(self) -> None:
@@ -106,7 +107,6 @@ class WorldVideoFeed:
         self._frames = ctx.Value("q", 0, lock=False)
         self._render_s = ctx.Value("d", 0.0, lock=False)
         self._stop = ctx.Value("b", 0, lock=False)
-        self._requested = ctx.Value("q", 0, lock=False)  # "sim" clock: captures so far
         self._conn, self._child_conn = ctx.Pipe(duplex=False)
         self._child_commands, self._commands = ctx.Pipe(duplex=False)  # child reads: a new world to show
         self._write_pose()
@@ -118,7 +118,6 @@ class WorldVideoFeed:
                 "commands": self._child_commands,
                 "frames": self._frames,
                 "render_s": self._render_s,
-                "requested": self._requested,
             },
             name="sim-vehicle-video",
             daemon=True,
@@ -173,13 +172,9 @@ class WorldVideoFeed:
                 raise VideoError(f"the render process cannot show the new world: {detail}")
 
     def capture(self) -> None:
-        """Hand the drone's current pose to the render process (cheap: no rendering, no waiting here).
-
-        With the "sim" clock each capture asks for a frame of this pose; one not yet drawn when a newer
-        capture comes is superseded by it (see `VideoConfig.clock`).
-        """
-        if self._write_pose() and self.config.clock == "sim":
-            self._requested.value += 1
+        """Hand the drone's current pose to the render process (cheap: no rendering, no waiting here);
+        its next frame shows it (see `VideoConfig.clock`)."""
+        self._write_pose()
 
     def _write_pose(self) -> bool:
         s = self._world.state()
@@ -260,7 +255,6 @@ def _serve(
     commands: Connection,
     frames: Any,
     render_s: Any,
-    requested: Any,
 ) -> None:
     """The render process: same scene, drone posed from `pose`, frames at `config.fps` (see `clock`);
     a new world when the vehicle sends one (`WorldVideoFeed.reset`)."""
@@ -283,16 +277,10 @@ def _serve(
             parent = os.getppid()
             # A vehicle killed outright never sets `stop` (and `daemon=True` only acts on a normal
             # exit): re-parenting means it is gone, so stop rather than render for nobody forever.
-            sim_clock = config.clock == "sim"
-            drawn = 0  # "sim" clock: the captures drawn so far
             while not stop.value and os.getppid() == parent:
                 if commands.poll():
                     scene = _reset(scene, commands.recv(), pose, server, conn)
                     next_t = time.monotonic()
-                if sim_clock and requested.value <= drawn:  # nothing new to draw
-                    time.sleep(0.0005)
-                    continue
-                drawn = requested.value  # (a capture that races this frame is drawn next)
                 t0 = time.monotonic()
                 if not scene.draw(_read_pose(pose), server):
                     break

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field, replace
 from typing import Any, TextIO
 
 from drone_inspect_core.config_files import from_json
+from drone_inspect_core.launcher_requests import reset_config
 from drone_inspect_core.signing import SigningKey
-from drone_inspect_core.warm_reset import reset_config
 from drone_inspect_core.world_options import CameraFaults, StartPose, WindConfig
 from sim_world.process_entry import LauncherRequests, say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
@@ -102,7 +102,7 @@ def run_sim_vehicle(
     """Serve the world until `stop` is set or `duration_s` passes; returns the loop statistics.
 
     `on_ready(vehicle)` is called once the ports are open, `on_end(vehicle)` before it closes.
-    `requests`: the launcher's; a reset request (`drone_inspect_core.warm_reset`) puts a new world behind
+    `requests`: the launcher's (`drone_inspect_core.launcher_requests`); a reset puts a new world behind
     the running vehicle (`SimVehicle.reset`, the video feed's `reset`), then `on_reset(vehicle, None)`,
     or `on_reset(vehicle, why)` when it could not (the old world flies on).
     """

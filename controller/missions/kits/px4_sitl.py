@@ -151,6 +151,7 @@ def _start(
     )
     vehicle_limits = vehicle_limits_for(limits)
     config = px4_sim_config(mission, instance, out_dir, system_id, tlog.listen_address[1], vehicle_limits)
+    paced = mission.px4.speed == "max"  # the lockstep waits for the controller too (`rig.LockstepPace`)
     sim = stack.enter_context(
         SimulatorProcess(
             "sim_world.px4_bridge",
@@ -160,13 +161,15 @@ def _start(
             start_timeout_s=PX4_START_TIMEOUT_S,
             name=f"PX4 SITL instance {instance}",
             reset_prefix=RESET_PREFIX if key else None,
+            paced=paced,
         )
     )
     vehicle = stack.enter_context(
         MavsdkVehicle(
             MavsdkConfig(
                 url=f"udpin://127.0.0.1:{mavsdk_port}", expected_system_id=system_id, clock="vehicle"
-            )
+            ),
+            pacer=sim.pace if paced else None,
         )
     )
     camera = stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))

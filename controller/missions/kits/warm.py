@@ -24,17 +24,18 @@ from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from controller.missions.kits.base import TLOG_NAME
 from controller.missions.kits.simulated import vehicle_limits_for
 from controller.missions.schema import ARDUPILOT_SITL, PX4_SITL, SIM_MAVLINK, Mission
 from drone_inspect_core.config_files import to_json
 from flight.errors import FlightError
-from flight.mavsdk.vehicle import MavsdkVehicle
 from flight.relay import MavlinkRelay
 from flight.safety import SafetyLimits
 from flight.sim_launcher import SimulatorProcess, SimulatorStartError
+from flight.types import Telemetry
+from flight.vehicle import Vehicle
 from perception.stream_camera import StreamCamera
 
 log = logging.getLogger(__name__)
@@ -44,14 +45,25 @@ FRESH_TELEMETRY_S = 0.05
 FRESH_TELEMETRY_TIMEOUT_S = 10.0
 
 
+class WarmVehicle(Protocol):
+    """A vehicle backend that can stay connected while the simulator beneath it is reset (MAVSDK's, the
+    ArduPilot GUIDED one)."""
+
+    def new_flight(self) -> None: ...
+
+    def time_s(self) -> float: ...
+
+    def telemetry(self) -> Telemetry: ...
+
+
 @dataclass
 class WarmSimulator:
-    """A simulator process with its relay, MAVSDK vehicle and stream camera, open; `stack` closes them."""
+    """A simulator process with its relay, vehicle backend and stream camera, open; `stack` closes them."""
 
     key: str
     sim: SimulatorProcess
     relay: MavlinkRelay
-    vehicle: MavsdkVehicle
+    vehicle: Vehicle
     camera: StreamCamera
     stack: ExitStack
     missions: int = 0
@@ -68,8 +80,9 @@ class WarmSimulator:
         out_dir.mkdir(parents=True, exist_ok=True)
         self.relay.record_to(out_dir / TLOG_NAME)
         answer = self.sim.reset(config, out_dir / log_name)
-        self.vehicle.new_flight()
-        wait_for_fresh_telemetry(self.vehicle)
+        vehicle: WarmVehicle = self.vehicle  # type: ignore[assignment]
+        vehicle.new_flight()
+        wait_for_fresh_telemetry(vehicle)
         self.missions += 1
         return answer
 
@@ -77,7 +90,7 @@ class WarmSimulator:
         self.stack.close()
 
 
-def wait_for_fresh_telemetry(vehicle: MavsdkVehicle) -> None:
+def wait_for_fresh_telemetry(vehicle: WarmVehicle) -> None:
     """Wait until the vehicle's clock has run `FRESH_TELEMETRY_S` on (the telemetry cached before a reset
     is then replaced); `SimulatorStartError` if it does not within `FRESH_TELEMETRY_TIMEOUT_S` (wall)."""
     start_s = vehicle.time_s()
