@@ -247,12 +247,17 @@ def run_px4_sim(
                             on_reset(ready if error is None else None, error or None)
 
                     paced = requests is not None and config.timing.speed is None
-                    return bridge.run(
-                        stop,
-                        max_sim_s=remaining,
-                        between=None if requests is None else between,
-                        pace=LockstepPace(requests) if paced and requests is not None else None,
-                    )
+                    try:
+                        return bridge.run(
+                            stop,
+                            max_sim_s=remaining,
+                            between=None if requests is None else between,
+                            pace=LockstepPace(requests) if paced and requests is not None else None,
+                        )
+                    except Px4DisconnectedError as exc:  # what PX4 said last, beside why we gave up
+                        raise Px4DisconnectedError(
+                            f"{exc}; PX4's console ended with:\n{px4.output_tail()}"
+                        ) from exc
             finally:
                 if video is not None:
                     video.close()
