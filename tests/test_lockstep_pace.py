@@ -8,6 +8,7 @@ import time
 from types import SimpleNamespace
 
 from drone_inspect_core.launcher_requests import PACE_LINE
+from flight.pacing import Pacer
 from sim_world.process_entry import LauncherRequests
 from sim_world.sitl.rig import LockstepPace, run_lockstep
 
@@ -54,3 +55,21 @@ def test_a_paced_loop_ticks_only_as_far_as_the_client_lets_it() -> None:
     stop.set()
     loop.join(2.0)
     assert 0.2 <= world.time_s < 0.21  # another lead, from where it was held
+
+
+def test_a_client_paces_every_period_of_the_vehicle_clock_and_while_a_command_blocks() -> None:
+    paces: list[float] = []
+    pacer = Pacer(lambda: paces.append(time.monotonic()), period_s=0.05, wall_period_s=0.02)
+    for t in (1.0, 1.02, 1.04, 1.05, 1.09, 1.10):  # a wait polling the vehicle's clock
+        pacer.tick(t)
+    assert len(paces) == 3  # at 1.0, 1.05 and 1.10
+    paces.clear()
+    with pacer.blocked():  # a command awaiting its answer: the vehicle's clock may stand still
+        time.sleep(0.2)
+    stopped = len(paces)
+    assert 4 <= stopped <= 12
+    time.sleep(0.1)
+    assert len(paces) == stopped  # no pacing once the command returned
+    Pacer(None).tick(5.0)  # a real vehicle: nothing to pace
+    with Pacer(None).blocked():
+        pass

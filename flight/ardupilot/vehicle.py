@@ -47,6 +47,7 @@ from flight.errors import (
     OffboardInterruptedError,
     VehicleConnectionError,
 )
+from flight.pacing import Pacer
 from flight.pymavlink_link import CommandAck, MavlinkLink
 from flight.types import FlightMode, Telemetry, VelocityBody
 from flight.vehicle import Deadline, Vehicle, wait_for
@@ -74,12 +75,10 @@ class ArduPilotVehicle(Vehicle):
     def __init__(
         self, config: ArduPilotConfig | None = None, pacer: Callable[[], None] | None = None
     ) -> None:
-        """`pacer`: on the vehicle's clock, called while a wait is under way, every `PACE_EVERY_S` of that
-        clock: a lockstepped simulator paced by its client runs only while the client waits
-        (`flight.sim_launcher.SimulatorProcess.pace`)."""
+        """`pacer`: a lockstepped simulator's pace (`flight.pacing.Pacer`): called while a wait polls the
+        vehicle's clock, every `PACE_EVERY_S` of it, and while a command awaits its answer."""
         self.config = config or ArduPilotConfig()
-        self._pacer = pacer
-        self._paced_s = -math.inf
+        self._pacer = Pacer(pacer, PACE_EVERY_S)
         self.state = ArduPilotState()
         self.setpoints_sent = 0
         self._link: MavlinkLink | None = None
@@ -218,9 +217,7 @@ class ArduPilotVehicle(Vehicle):
         until = self.time_s() + seconds
         while (now_s := self.time_s()) < until:
             self._require_link("sleep()").monitor.check("sleep()")  # a frozen clock ends here, as a lost link
-            if self._pacer is not None and now_s - self._paced_s >= PACE_EVERY_S:
-                self._paced_s = now_s
-                self._pacer()
+            self._pacer.tick(now_s)
             time.sleep(0.002)
 
     def _wait(
@@ -378,7 +375,8 @@ class ArduPilotVehicle(Vehicle):
             self.sleep(self.config.poll_s)
 
     def _command(self, command: int, params: tuple[float, ...], origin: str) -> CommandAck:
-        return self._require_link(origin).command(*self._target, command, params, origin=origin)
+        with self._pacer.blocked():
+            return self._require_link(origin).command(*self._target, command, params, origin=origin)
 
     def _require_link(self, origin: str) -> MavlinkLink:
         if self._link is None:

@@ -46,6 +46,7 @@ from flight.errors import (
     VehicleConnectionError,
 )
 from flight.mavsdk.link import MavsdkConfig, TelemetryCache, resend_on_timeout, route_mavsdk_logs
+from flight.pacing import Pacer
 from flight.types import Closable, FlightMode, Telemetry, VelocityBody
 from flight.vehicle import Deadline, Vehicle, wait_for
 
@@ -72,13 +73,11 @@ class MavsdkVehicle(Vehicle):
         pacer: Callable[[], None] | None = None,
     ) -> None:
         """`link`: what carries the connection and goes with it (a relay in front of MAVSDK), closed last.
-        `pacer`: on the vehicle's clock, called while a wait is under way, every `offboard_stream_period_s`
-        of that clock: a lockstepped simulator paced by its client runs only while the client waits
-        (`flight.sim_launcher.SimulatorProcess.pace`)."""
+        `pacer`: a lockstepped simulator's pace (`flight.pacing.Pacer`): called while a wait polls the
+        vehicle's clock, every `offboard_stream_period_s` of it, and while a command awaits its answer."""
         self.config = config or MavsdkConfig()
         self._link = link
-        self._pacer = pacer
-        self._paced_s = -math.inf
+        self._pacer = Pacer(pacer, self.config.offboard_stream_period_s)
         self.setpoints_sent = 0
         self._cache = TelemetryCache(self.config.link_timeout_s)
         self._texts_at_offboard = 0  # the STATUSTEXT count when offboard was confirmed
@@ -205,9 +204,7 @@ class MavsdkVehicle(Vehicle):
         next_setpoint_s = self.time_s() + self.config.offboard_stream_period_s
         while (now_s := self.time_s()) < until:
             self._cache.link.check("sleep()")  # a frozen vehicle clock ends here, as a lost link
-            if self._pacer is not None and now_s - self._paced_s >= self.config.offboard_stream_period_s:
-                self._paced_s = now_s
-                self._pacer()
+            self._pacer.tick(now_s)
             if self._in_offboard and now_s >= next_setpoint_s and self._offboard is not None:
                 next_setpoint_s = now_s + self.config.offboard_stream_period_s
                 self._stream_setpoint()
@@ -264,7 +261,8 @@ class MavsdkVehicle(Vehicle):
         while True:
             self._cache.link.check("arm()")
             try:
-                action.arm()
+                with self._pacer.blocked():
+                    action.arm()
                 break
             except ActionError as exc:
                 if exc.result not in _RETRY_ARM or deadline.remaining_s() < self.config.arm_retry_period_s:
@@ -280,8 +278,9 @@ class MavsdkVehicle(Vehicle):
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise ValueError(f"takeoff altitude must be a positive number of metres, got {altitude_m!r}")
         try:
-            resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m), self._cache.link)
-            resend_on_timeout(action.takeoff, self._cache.link)
+            with self._pacer.blocked():
+                resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m), self._cache.link)
+                resend_on_timeout(action.takeoff, self._cache.link)
         except ActionError as exc:
             armed = self.telemetry().armed
             detail = self._last_text() or ("the vehicle is not armed" if not armed else "")
@@ -340,7 +339,8 @@ class MavsdkVehicle(Vehicle):
                 self.set_velocity_body(self._last_setpoint)
                 self.sleep(0.05)
             try:
-                resend_on_timeout(offboard.start)
+                with self._pacer.blocked():
+                    resend_on_timeout(offboard.start)
                 break
             except OffboardError as exc:
                 if exc.result.name == "TIMEOUT":  # a vehicle gone silent is a lost link, not a refusal
@@ -360,7 +360,8 @@ class MavsdkVehicle(Vehicle):
         self._in_offboard = False
         action = self._require(self._action, "hold()")
         try:
-            resend_on_timeout(action.hold, self._cache.link)
+            with self._pacer.blocked():
+                resend_on_timeout(action.hold, self._cache.link)
         except ActionError as exc:
             raise CommandDeniedError("hold()", exc.result.name, self._last_text()) from None
         self._confirm_mode(FlightMode.HOLD, None, "hold()")
@@ -371,7 +372,8 @@ class MavsdkVehicle(Vehicle):
         if self.telemetry().flight_mode != FlightMode.OFFBOARD:
             return
         try:
-            resend_on_timeout(offboard.stop, self._cache.link)
+            with self._pacer.blocked():
+                resend_on_timeout(offboard.stop, self._cache.link)
         except OffboardError as exc:
             raise CommandDeniedError("stop_offboard()", exc.result.name, self._last_text()) from None
         self._confirm_mode(FlightMode.HOLD, timeout_s, "stop_offboard()")
@@ -382,7 +384,8 @@ class MavsdkVehicle(Vehicle):
             self.stop_offboard()
         self._in_offboard = False
         try:
-            resend_on_timeout(action.land, self._cache.link)
+            with self._pacer.blocked():
+                resend_on_timeout(action.land, self._cache.link)
         except ActionError as exc:
             raise CommandDeniedError("land()", exc.result.name, self._last_text()) from None
         self._wait(lambda t: not t.in_air, timeout_s or self.config.timeouts.land_s, "land()", "landed state")
@@ -412,7 +415,8 @@ class MavsdkVehicle(Vehicle):
         if not self.telemetry().armed:
             return
         try:
-            resend_on_timeout(action.disarm, self._cache.link)
+            with self._pacer.blocked():
+                resend_on_timeout(action.disarm, self._cache.link)
         except ActionError as exc:
             # PX4's auto-disarm may have won the race (its ack lost, or telemetry a heartbeat late):
             # that is success, so give telemetry a moment to say so before calling it a failure.

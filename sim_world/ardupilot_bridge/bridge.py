@@ -126,6 +126,8 @@ class ArduPilotBridge:
         self.frame = AutopilotFrame()
         self.last_truth: Truth | None = None
         """What ArduPilot was last told (its frame)."""
+        self.rebased_at_s: float | None = None
+        """ArduPilot's clock (the timestamps it is sent, s) when the last `rebase`'s world began."""
         self._last_frame: int | None = None
         self._last_reply = b""
         self._range_m = math.inf
@@ -149,6 +151,7 @@ class ArduPilotBridge:
         reader, self.frame = continue_in(world, origin_enu_m, period_s, last, next_time_s, self.camera)
         self.world, self.origin_enu_m, self._truth = world, origin_enu_m, reader
         self._next_idle_frame_s = 0.0
+        self.rebased_at_s = next_time_s + period_s  # ArduPilot's clock: the next reply's timestamp
 
     # --------------------------------------------------------------------- loop
     def run(

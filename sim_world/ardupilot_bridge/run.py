@@ -14,7 +14,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -111,6 +111,8 @@ class ArduPilotSimReady:
     ardupilot_pid: int | None
     first_frame_after_wall_s: float
     frame_rate_hz: int
+    vehicle_time_s: float | None = None
+    """After a reset: ArduPilot's clock (s) when the new world began."""
 
 
 def build_ardupilot_world(config: ArduPilotSimConfig) -> World:
@@ -164,7 +166,8 @@ def run_ardupilot_sim(
                         assert requests is not None
                         error = worlds.take(requests, bridge, video)
                         if error is not False and on_reset is not None:
-                            on_reset(facts[0] if error is None else None, error or None)
+                            answer = replace(facts[0], vehicle_time_s=bridge.rebased_at_s)
+                            on_reset(answer if error is None else None, error or None)
 
                     paced = requests is not None and config.timing.speed is None
                     try:

@@ -128,6 +128,8 @@ class Px4Bridge:
         self.frame = AutopilotFrame()
         self.last_truth: Truth | None = None
         """What PX4 was last told (its frame)."""
+        self.rebased_at_s: float | None = None
+        """PX4's clock (its `time_boot`, s) when the last `rebase`'s world began."""
         self._stats = BridgeStats()
         self._stats_lock = threading.Lock()
         world.drone.stop_rotors()
@@ -153,6 +155,7 @@ class Px4Bridge:
         reader, self.frame = continue_in(
             world, origin_enu_m, period_s, self.last_truth, next_time_s, self.camera
         )
+        self.rebased_at_s = next_time_s + PX4_CLOCK_OFFSET_US / 1e6  # PX4's own clock (time_boot)
         self.world, self.origin_enu_m, self._truth_reader = world, origin_enu_m, reader
 
     # --------------------------------------------------------------------- loop

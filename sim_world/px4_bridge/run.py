@@ -14,7 +14,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TextIO
 
@@ -142,6 +142,8 @@ class Px4SimReady:
     """The bridge's TCP port PX4 dialled."""
     px4_mavlink_udp: int | None = None
     """PX4's one MAVLink port (bound on every interface), where the run chose it."""
+    vehicle_time_s: float | None = None
+    """After a reset: PX4's clock (its `time_boot`, s) when the new world began."""
 
 
 def build_px4_world(config: Px4SimConfig) -> World:
@@ -244,7 +246,8 @@ def run_px4_sim(
                         assert requests is not None
                         error = worlds.take(requests, bridge, video)
                         if error is not False and on_reset is not None:
-                            on_reset(ready if error is None else None, error or None)
+                            answer = replace(ready, vehicle_time_s=bridge.rebased_at_s)
+                            on_reset(answer if error is None else None, error or None)
 
                     paced = requests is not None and config.timing.speed is None
                     try:

@@ -72,6 +72,9 @@ class SimVehicleReady:
     local_address: list[Any]
     video_url: str | None
     truth_url: str | None
+    vehicle_time_s: float | None = None
+    """After a reset: the vehicle's clock (its `time_boot_ms`, in s) when the new world began; telemetry
+    stamped later is the new world's."""
 
 
 def build_world(run: SimVehicleRun) -> tuple[World, SimVehicleConfig]:
@@ -252,7 +255,8 @@ def serve(
         )
 
     def reset(vehicle: SimVehicle, error: str | None) -> None:
-        say_ready(out, RESET_PREFIX, info(vehicle) if error is None else {"error": error})
+        answer = replace(info(vehicle), vehicle_time_s=vehicle.reset_clock_s) if error is None else None
+        say_ready(out, RESET_PREFIX, answer if answer is not None else {"error": error})
 
     def end(vehicle: SimVehicle) -> None:
         say_ready(out, SUMMARY_PREFIX, link_summary(vehicle))

@@ -118,6 +118,8 @@ class SimVehicle:
         self._builder = TelemetryBuilder(self.config.home, uid=0x5157_0000 + self.config.instance)
         self._boot_s = model.time_s
         self._scheduler: MessageScheduler | None = None  # the link's stream rates, kept over resets
+        self.reset_clock_s: float | None = None
+        """The vehicle's clock (`time_boot_ms`, s) when the last reset's world began (None: never reset)."""
         self._link: UdpMavlinkLink | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -191,6 +193,7 @@ class SimVehicle:
         if self._thread.is_alive() or self._error is not None:
             raise SimVehicleError(f"the vehicle loop did not stop for a reset: {self._error!r}")
         elapsed_s = self._model.time_s - self._boot_s
+        self.reset_clock_s = elapsed_s
         self.config, self._model = config, model
         self._fresh_state(model, replace(config.commander, arming_boot_delay_s=0.0))  # booted long ago
         self._boot_s = model.time_s - elapsed_s  # time_boot_ms runs on: the client's clock of the vehicle

@@ -9,7 +9,7 @@ and the report see only this, never the backend. A flown collection
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -114,6 +114,20 @@ class LoadedModels:
     simulators: WarmSimulators | None = None
     """A simulated MAVLink vehicle kept warm between the process's missions (`kits.warm`); None: each
     mission starts its own."""
+
+
+def shared_models(missions: Sequence[Mission]) -> LoadedModels:
+    """The models several missions flown in one process share, loaded once: the shipped image detector
+    when any of them uses it, and the latent planner of the first that flies one (a mission with another
+    checkpoint loads its own)."""
+    detector = None
+    if any(m.detector == "image" and m.detector_checkpoint is None for m in missions):
+        from perception.image_detector import ImageDetector  # torch: loaded only when used
+
+        detector = ImageDetector.shipped()
+    latent = next((m for m in missions if m.planner == "latent"), None)
+    planner = None if latent is None else make_planner("latent", checkpoint=latent.checkpoint)
+    return LoadedModels(detector=detector, latent=planner, latent_checkpoint=latent and latent.checkpoint)
 
 
 def models_detector(mission: Mission, models: LoadedModels | None) -> Detector | None:

@@ -82,7 +82,7 @@ class WarmSimulator:
         answer = self.sim.reset(config, out_dir / log_name)
         vehicle: WarmVehicle = self.vehicle  # type: ignore[assignment]
         vehicle.new_flight()
-        wait_for_fresh_telemetry(vehicle)
+        wait_for_fresh_telemetry(vehicle, answer.get("vehicle_time_s"))
         self.missions += 1
         return answer
 
@@ -90,12 +90,14 @@ class WarmSimulator:
         self.stack.close()
 
 
-def wait_for_fresh_telemetry(vehicle: WarmVehicle) -> None:
-    """Wait until the vehicle's clock has run `FRESH_TELEMETRY_S` on (the telemetry cached before a reset
-    is then replaced); `SimulatorStartError` if it does not within `FRESH_TELEMETRY_TIMEOUT_S` (wall)."""
-    start_s = vehicle.time_s()
+def wait_for_fresh_telemetry(vehicle: WarmVehicle, world_began_s: float | None) -> None:
+    """Wait until the vehicle's clock has run `FRESH_TELEMETRY_S` past the moment the new world began
+    (`world_began_s`, as the simulator answered the reset; None: past now), so the telemetry in hand is
+    the new world's and its autopilot runs in it; `SimulatorStartError` if it does not within
+    `FRESH_TELEMETRY_TIMEOUT_S` (wall)."""
+    start_s = vehicle.time_s() if world_began_s is None else world_began_s
     deadline = time.monotonic() + FRESH_TELEMETRY_TIMEOUT_S
-    while vehicle.time_s() - start_s < FRESH_TELEMETRY_S:
+    while not vehicle.time_s() - start_s >= FRESH_TELEMETRY_S:
         if time.monotonic() > deadline:
             raise SimulatorStartError(
                 f"the vehicle's clock did not run on within {FRESH_TELEMETRY_TIMEOUT_S:.0f} s of a reset"
