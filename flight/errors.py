@@ -64,12 +64,11 @@ class ModeChangeError(FlightError):
 class LinkLostError(FlightError):
     """The vehicle stopped answering: no heartbeat or telemetry for longer than the link timeout."""
 
-    def __init__(self, origin: str, silent_s: float, timeout_s: float) -> None:
+    def __init__(self, origin: str, silent_s: float, timeout_s: float, why: str | None = None) -> None:
         self.silent_s = silent_s
         self.timeout_s = timeout_s
-        super().__init__(
-            origin, "LINK_LOST", f"no telemetry for {silent_s:.1f} s (link timeout {timeout_s:.1f} s)"
-        )
+        detail = f"no telemetry for {silent_s:.1f} s (link timeout {timeout_s:.1f} s)"
+        super().__init__(origin, "LINK_LOST", detail if why is None else f"{why}; {detail}")
 
 
 class OffboardInterruptedError(FlightError):

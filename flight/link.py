@@ -32,7 +32,10 @@ class LinkMonitor:
         clock: Callable[[], float] = time.monotonic,
         quiet_s: float = 0.5,
         connection_state: bool = True,
+        peer_alive: Callable[[], bool] | None = None,
     ) -> None:
+        """`peer_alive`: where the vehicle is a simulator this process started, whether its process still
+        runs; one that has exited is lost at once, without waiting out the timeout."""
         if not timeout_s > 0:
             raise ValueError(f"link timeout must be > 0, got {timeout_s!r}")
         self.timeout_s = timeout_s
@@ -42,6 +45,7 @@ class LinkMonitor:
         self._last_heard_s = clock()
         self._connected = True
         self._use_connection_state = connection_state
+        self._peer_alive = peer_alive
 
     def heard(self) -> None:
         """A message arrived from the vehicle."""
@@ -64,6 +68,8 @@ class LinkMonitor:
         with self._lock:
             silent_s = self._clock() - self._last_heard_s
             connected = self._connected
+        if self._peer_alive is not None and not self._peer_alive():
+            raise LinkLostError(origin, silent_s, self.timeout_s, "the simulator's process has exited")
         disconnected = not connected and self._use_connection_state
         if silent_s > self.timeout_s or (disconnected and silent_s > self.quiet_s):
             raise LinkLostError(origin, silent_s, self.timeout_s)

@@ -133,6 +133,22 @@ def fly_offset(
     )
 
 
+class Milestones(dict[str, float]):
+    """A flight's milestones on the vehicle's clock (name → `vehicle.time_s()`), as `take_off_to_start` and
+    the mission runner note them; `wall_s` keeps, beside each, when it was noted on the wall clock
+    (`time.perf_counter()` seconds since `started`), so a profile can say what each phase cost in wall
+    time as well as on the vehicle's clock (a simulator's)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.started = time.perf_counter()
+        self.wall_s: dict[str, float] = {}
+
+    def __setitem__(self, name: str, value: float) -> None:
+        super().__setitem__(name, value)
+        self.wall_s[name] = time.perf_counter() - self.started
+
+
 def take_off_to_start(
     vehicle: Vehicle,
     altitude_m: float,

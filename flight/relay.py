@@ -157,14 +157,14 @@ class MavlinkRelay:
         self._file: BinaryIO | None = None
         self._logged_bytes = 0
         self._next_check_s = 0.0
+        self._file_lock = threading.Lock()  # the relay thread writes, `record_to` swaps the file
         if self.path is not None:
             try:
-                self.path.parent.mkdir(parents=True, exist_ok=True)
-                self._file = self.path.open("xb", buffering=0)  # never over an earlier log
-            except OSError as exc:
+                self._file = _new_log(self.path)
+            except OSError:
                 self._vehicle_sock.close()
                 self._client_sock.close()
-                raise OSError(f"MAVLink relay: cannot start the log {self.path}: {exc}") from exc
+                raise
         self._thread = threading.Thread(target=self._run, name="mavlink-relay", daemon=True)
         self._thread.start()
         log.info(
@@ -174,6 +174,19 @@ class MavlinkRelay:
             client_port,
             f", log {self.path}" if self.path else "",
         )
+
+    def record_to(self, tlog_path: str | Path) -> None:
+        """Finish the current .tlog and record what crosses from now on in `tlog_path` (new), as a fresh
+        recording: a relay kept between missions gives each its own log. `OSError` if it cannot start."""
+        new_file = _new_log(Path(tlog_path))
+        with self._file_lock:
+            old, self._file = self._file, new_file
+            self.path, self.recording_error = Path(tlog_path), None
+            self._logged_bytes = self.messages_logged = 0
+            self._next_check_s = 0.0
+        if old is not None:
+            with contextlib.suppress(OSError):
+                old.close()
 
     def message_times_s(self, msg_id: int) -> list[float]:
         """Monotonic times at which uplink messages `msg_id` were forwarded to the vehicle."""
@@ -303,7 +316,9 @@ class MavlinkRelay:
                     self.uplink_counts[msg_id] += 1
                     self._uplink_times.setdefault(msg_id, []).append(now)
         if self._file is not None and messages:
-            self._record(messages)
+            with self._file_lock:
+                if self._file is not None:
+                    self._record(messages)
 
     def _record(self, messages: list[mavlink.MAVLink_message]) -> None:
         """Append `messages` to the .tlog; on a failed write, stop recording (once) and keep relaying."""
@@ -355,12 +370,13 @@ class MavlinkRelay:
             self._thread.join(timeout=2.0)
         for sock in (self._vehicle_sock, self._client_sock):
             sock.close()
-        if self._file is not None:
-            try:
-                self._file.close()
-                self._file = None
-            except OSError as exc:  # the last bytes could not reach the disk
-                self._stop_recording(exc)
+        with self._file_lock:
+            if self._file is not None:
+                try:
+                    self._file.close()
+                    self._file = None
+                except OSError as exc:  # the last bytes could not reach the disk
+                    self._stop_recording(exc)
 
     def __enter__(self) -> MavlinkRelay:
         return self
@@ -369,6 +385,15 @@ class MavlinkRelay:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.close()
+
+
+def _new_log(path: Path) -> BinaryIO:
+    """A new .tlog at `path`, never over an earlier one; `OSError` naming it."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return path.open("xb", buffering=0)
+    except OSError as exc:
+        raise OSError(f"MAVLink relay: cannot start the log {path}: {exc}") from exc
 
 
 def relay_in_front(

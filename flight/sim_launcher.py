@@ -3,10 +3,16 @@
 The child runs in its own session, so a Ctrl-C in the terminal reaches only the
 controller (which lands first and then stops the child); it watches its parent and
 stops by itself within a second when the parent dies, however the parent dies. It
-reads its config from a pipe (`--config -`; `secrets`, such as a run's signing key, are added
-there and nowhere else: the copy of the config kept beside the log leaves them out) and prints
-one line `<prefix>{json}` when it is ready; `start()` waits for that line (or for the child's
+reads its config from a pipe (`--config -`, the first line; `secrets`, such as a run's signing key,
+are added there and nowhere else: the copy of the config kept beside the log leaves them out) and
+prints one line `<prefix>{json}` when it is ready; `start()` waits for that line (or for the child's
 exit, reported with the end of its output) and `ready` holds the JSON.
+
+A lockstepped simulator paced by its client (`paced=True`) keeps that pipe open for `pace()`, and one
+kept warm between missions (given a `reset_prefix`) for resets: `reset(config,
+log_path)` sends it a new world on one line (`drone_inspect_core.launcher_requests`), waits for its answer
+line (`<reset_prefix>{json}`: the new world is built, or why not) and copies its output to the new
+log from then on; the process, its ports and its autopilot stay.
 
 The child's output comes through a pipe that a reader thread drains all the time and
 copies into `log_path` as a record: a log that cannot be written (a full disk, a removed
@@ -36,6 +42,7 @@ from typing import Any
 
 from drone_inspect_core.config_files import to_json
 from drone_inspect_core.files import still_there, write_json_atomic
+from drone_inspect_core.launcher_requests import PACE_LINE, reset_line
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +51,10 @@ _TAIL_LINES = 200
 
 class SimulatorStartError(RuntimeError):
     """The simulator exited or did not become ready; the message carries the end of its log."""
+
+
+class SimulatorResetError(SimulatorStartError):
+    """A warm simulator could not be reset to a new world (it refused, failed or did not answer)."""
 
 
 class SimulatorProcess:
@@ -58,7 +69,11 @@ class SimulatorProcess:
         start_timeout_s: float = 90.0,
         name: str = "simulator",
         secrets: dict[str, Any] | None = None,
+        reset_prefix: str | None = None,
+        paced: bool = False,
     ) -> None:
+        """`reset_prefix`: the child's answer to a reset request; given, the child is kept resettable
+        (its stdin stays open for `reset()`). `paced`: its stdin stays open for `pace()` too."""
         self.module, self.log_path = module, Path(log_path)
         self.config: dict[str, Any] = to_json(config)
         """The child's config as JSON (`drone_inspect_core.config_files.to_json` of a config object), kept
@@ -73,6 +88,13 @@ class SimulatorProcess:
         self._tail: deque[str] = deque(maxlen=_TAIL_LINES)
         self._ready_line = threading.Event()
         self._reader: threading.Thread | None = None
+        self.reset_prefix = reset_prefix
+        self._keep_stdin = reset_prefix is not None or paced
+        self._stdin_lock = threading.Lock()
+        self._reset_answer: dict[str, Any] | None = None
+        self._reset_done = threading.Event()
+        self._log_lock = threading.Lock()
+        self._next_log: Path | None = None
 
     def start(self) -> SimulatorProcess:
         try:  # a copy for people, whole or not at all; the child reads its config from the pipe
@@ -92,8 +114,10 @@ class SimulatorProcess:
         self._reader.start()
         try:
             assert self._process.stdin is not None
-            with self._process.stdin:
-                self._process.stdin.write(json.dumps({**self.config, **self._secrets}).encode())
+            self._process.stdin.write(json.dumps({**self.config, **self._secrets}).encode() + b"\n")
+            self._process.stdin.flush()
+            if not self._keep_stdin:
+                self._process.stdin.close()
             self._wait_ready()
         except BaseException:
             self.close()
@@ -117,6 +141,24 @@ class SimulatorProcess:
                 with contextlib.suppress(ValueError):
                     self.ready = json.loads(line[len(self.ready_prefix) :])
                     self._ready_line.set()
+            if self.reset_prefix is not None and line.startswith(self.reset_prefix):
+                try:
+                    self._reset_answer = json.loads(line[len(self.reset_prefix) :])
+                except ValueError:
+                    self._reset_answer = {"error": f"an answer that is not JSON: {line!r}"}
+                self._reset_done.set()
+            with self._log_lock:
+                next_log, self._next_log = self._next_log, None
+            if next_log is not None:  # a reset: the new world's output goes to its own log
+                if log_file is not None:
+                    with contextlib.suppress(OSError):
+                        log_file.close()
+                self.log_path, self.log_error = next_log, None
+                try:
+                    log_file = next_log.open("ab")
+                except OSError as exc:
+                    log_file = None
+                    self._log_failed(exc)
             if log_file is not None:
                 try:
                     if time.monotonic() >= next_check_s:  # a removed folder gives no write error
@@ -157,6 +199,55 @@ class SimulatorProcess:
                     f"its output ends with:\n{self.output()[-2000:]}"
                 )
 
+    def reset(self, config: Any, log_path: Path, timeout_s: float = 60.0) -> dict[str, Any]:
+        """Give the warm child a new world (`config`: its whole config, of which it may change only the
+        world) and copy its output to `log_path` from the answer on; the child's answer (its ready
+        facts for the new world). `SimulatorResetError` when it refuses, fails, dies or is silent."""
+        process = self._process
+        if self.reset_prefix is None or process is None or process.stdin is None or process.stdin.closed:
+            raise SimulatorResetError(f"{self.name} is not a warm simulator that can be reset")
+        self.config = to_json(config)
+        Path(log_path).parent.mkdir(parents=True, exist_ok=True)
+        with contextlib.suppress(OSError):  # a copy for people, as at start
+            write_json_atomic(Path(log_path).with_suffix(".json"), self.config)
+        self._reset_done.clear()
+        self._reset_answer = None
+        with self._log_lock:
+            self._next_log = Path(log_path)
+        try:
+            self._send(reset_line(self.config))
+        except OSError as exc:
+            raise SimulatorResetError(f"{self.name}: cannot send the reset: {exc}") from exc
+        deadline = time.monotonic() + timeout_s
+        while not self._reset_done.wait(0.1):
+            if process.poll() is not None:
+                raise SimulatorResetError(
+                    f"{self.name} exited with {process.returncode} during a reset; its output ends with:\n"
+                    f"{self.output()[-2000:]}"
+                )
+            if time.monotonic() > deadline:
+                raise SimulatorResetError(f"{self.name} did not answer a reset within {timeout_s:.0f} s")
+        answer = self._reset_answer or {}
+        if "error" in answer:
+            raise SimulatorResetError(f"{self.name} could not reset: {answer['error']}")
+        self.ready = answer
+        return answer
+
+    def pace(self) -> None:
+        """Tell a lockstepped child (`paced=True`) that its client waits on the vehicle's clock, so it may
+        run on (`sim_world.sitl.rig.LockstepPace`); a child gone or not paced: nothing."""
+        if self._keep_stdin:
+            with contextlib.suppress(OSError, ValueError):
+                self._send(PACE_LINE)
+
+    def _send(self, line: bytes) -> None:
+        process = self._process
+        if process is None or process.stdin is None:
+            raise OSError("the simulator has no open stdin")
+        with self._stdin_lock:
+            process.stdin.write(line)
+            process.stdin.flush()
+
     def output(self) -> str:
         """The last lines the child printed (also in `log_path` while that can be written)."""
         return "\n".join(self._tail)
@@ -174,6 +265,9 @@ class SimulatorProcess:
         process, self._process = self._process, None
         if process is None:
             return
+        if process.stdin is not None:
+            with contextlib.suppress(OSError):
+                process.stdin.close()
         if process.poll() is None:
             process.send_signal(signal.SIGTERM)
             try:

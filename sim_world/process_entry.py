@@ -9,7 +9,9 @@ A simulator (`sim-vehicle`, the PX4 bridge) runs either from a person's terminal
 - as a child (`watch_parent=True`) it also stops when its parent process is gone,
   however the parent died (SIGKILL included): the parent is polled every 0.5 s, and a
   stop that hangs for 10 s ends the process hard;
-- it prints one line `<prefix>{json}` when it is ready, which launchers wait for.
+- it prints one line `<prefix>{json}` when it is ready, which launchers wait for;
+- a launcher's later lines on its stdin (a warm simulator's resets, `drone_inspect_core.launcher_requests`)
+  are `LauncherRequests`, which the serving loop takes between its other work.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import queue
 import signal
 import sys
 import threading
@@ -25,6 +28,8 @@ from collections.abc import Callable
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
 from typing import Any, TextIO
+
+from drone_inspect_core.launcher_requests import is_pace
 
 log = logging.getLogger(__name__)
 
@@ -68,20 +73,67 @@ def say_ready(out: TextIO, prefix: str, info: Any) -> None:
     out.flush()
 
 
+class LauncherRequests:
+    """The launcher's requests after the config, one JSON object a line on `stream` (the child's stdin,
+    `drone_inspect_core.launcher_requests`), read by a daemon thread until the stream ends (a launcher
+    that asks nothing closes it at once); `take()` hands the serving loop the next one, never blocking.
+    Pace requests are not queued: each counts in `paces` (when, `paced_at`, monotonic) and sets `paced`.
+    A line that is not a JSON object is said and dropped."""
+
+    def __init__(self, stream: TextIO, name: str) -> None:
+        self._queue: queue.Queue[dict[str, Any]] = queue.Queue()
+        self._name = name
+        self.paces = 0
+        self.paced_at = 0.0
+        self.paced = threading.Event()
+        threading.Thread(target=self._read, args=(stream,), name="launcher-requests", daemon=True).start()
+
+    def _read(self, stream: TextIO) -> None:
+        for line in stream:
+            if not line.strip():
+                continue
+            try:
+                request = json.loads(line)
+            except ValueError:
+                request = None
+            if isinstance(request, dict) and is_pace(request):
+                self.paced_at = time.monotonic()
+                self.paces += 1
+                self.paced.set()
+            elif isinstance(request, dict):
+                self._queue.put(request)
+            else:
+                log.error("%s: not a JSON object from the launcher: %.80r", self._name, line)
+
+    def take(self) -> dict[str, Any] | None:
+        try:
+            return self._queue.get_nowait()
+        except queue.Empty:
+            return None
+
+
 def config_entry_point(
     argv: list[str], module: str, name: str, load: Callable[[dict[str, Any]], Any], serve: Callable[..., int]
 ) -> int:
-    """`python -m <module> --config FILE.json` (or `-`: the JSON on stdin, as launchers pass it): parse
-    the config with `load`, then `serve(config, stdout, watch_parent=True)`; 2 on bad usage or a bad
-    config (named), else serve's exit code."""
+    """`python -m <module> --config FILE.json` (or `-`: the JSON on stdin's first line, as launchers pass
+    it, the launcher's requests on the lines after it): parse the config with `load`, then
+    `serve(config, stdout, watch_parent=True, requests=...)`; 2 on bad usage or a bad config (named),
+    else serve's exit code."""
     if len(argv) != 2 or argv[0] != "--config":
         print(f"usage: python -m {module} --config FILE.json|-", file=sys.stderr)
         return 2
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
-        text = sys.stdin.read() if argv[1] == "-" else Path(argv[1]).read_text()
-        config = load(json.loads(text))
+        text = sys.stdin.readline() if argv[1] == "-" else Path(argv[1]).read_text()
+        try:
+            data = json.loads(text)
+        except ValueError:
+            if argv[1] != "-":
+                raise
+            data = json.loads(text + sys.stdin.read())  # a person's JSON over several lines
+        config = load(data)
     except (OSError, ValueError, KeyError, TypeError) as exc:
         print(f"{name}: bad config {argv[1]}: {exc}", file=sys.stderr)
         return 2
-    return serve(config, sys.stdout, watch_parent=True)
+    requests = LauncherRequests(sys.stdin, name) if argv[1] == "-" else None
+    return serve(config, sys.stdout, watch_parent=True, requests=requests)

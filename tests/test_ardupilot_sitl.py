@@ -61,12 +61,12 @@ def test_ardupilot_flies_the_world_ready_arm_hover_and_a_half_metre_move(tmp_pat
             system_id=system_id,
         )
         with SimulatorProcess(
-            "sim_world.ardupilot_bridge", config, tmp_path / "sim.log", READY_PREFIX
+            "sim_world.ardupilot_bridge", config, tmp_path / "sim.log", READY_PREFIX, paced=True
         ) as sim:
             truth = sim.ready["truth_url"]
             url = config.mavlink_url
-            backend = ArduPilotVehicle(
-                ArduPilotConfig(url=url, expected_system_id=system_id, clock="vehicle")
+            backend = ArduPilotVehicle(  # paced, as missions are: the world waits while the test does
+                ArduPilotConfig(url=url, expected_system_id=system_id, clock="vehicle"), pacer=sim.pace
             )
             with backend:
                 vehicle = SafeVehicle(backend)

@@ -147,7 +147,8 @@ def test_dropped_frames_are_never_sent(feed_world: World) -> None:
                 feed.stream_url.replace("/stream.mjpg", "/frame.jpg"), timeout=2.0
             ) as r:
                 numbers.append(int(r.headers["X-Frame-Number"]))
-        assert 4 <= max(numbers) + 1 <= 16  # about half of 20 rendered frames published
+        rendered, published = feed.frames, max(numbers) + 1
+        assert rendered >= 20 and 0.3 <= published / rendered <= 0.7  # about half of them published
     finally:
         feed.close()
 

@@ -91,6 +91,17 @@ def test_a_lockstep_vehicle_is_lost_only_by_its_silence() -> None:
         link.check("sleep()")
 
 
+def test_a_simulator_whose_process_exited_is_lost_at_once_not_after_the_timeout() -> None:
+    clock = FakeClock()
+    alive = [True]
+    link = LinkMonitor(6.0, clock, connection_state=False, peer_alive=lambda: alive[0])
+    clock.now_s += 0.2
+    link.check("sleep()")  # running and recently heard: fine
+    alive[0] = False  # PX4 killed: its bridge ends
+    with pytest.raises(LinkLostError, match="process has exited"):
+        link.check("sleep()")
+
+
 def test_a_command_timeout_on_a_silent_vehicle_is_a_lost_link_and_on_a_live_one_returns_at_once() -> None:
     now = [0.0]
 

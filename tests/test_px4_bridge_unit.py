@@ -252,7 +252,7 @@ def test_a_run_that_chooses_px4s_ports_runs_one_link_on_them(tmp_path: Path) -> 
         mavlink = (links / "px4-rc.mavlink").read_text()
         starts = [line for line in mavlink.splitlines() if line.startswith("mavlink start")]
         assert starts == ["mavlink start -x -u 41002 -r 4000000 -f -m onboard -o 41003"]  # no GCS link
-        assert "mavlink stream -u 41002 -s HEARTBEAT -r 10" in mavlink.splitlines()  # modes seen in 0.1 s
+        assert "mavlink stream -r 10 -s HEARTBEAT -u 41002" in mavlink.splitlines()  # modes seen in 0.1 s
     finally:
         process.close()
     assert not (Px4Process(Px4Options(tmp_path / "px4")).workdir / "bin" / "px4-rc.mavlink").exists()

@@ -57,11 +57,13 @@ def test_px4_flies_the_world_ready_hover_and_a_half_metre_move(tmp_path: Path) -
             timing=BridgeTiming(speed=None),
             system_id=system_id,
         )
-        with SimulatorProcess("sim_world.px4_bridge", config, tmp_path / "sim.log", READY_PREFIX) as sim:
+        with SimulatorProcess(
+            "sim_world.px4_bridge", config, tmp_path / "sim.log", READY_PREFIX, paced=True
+        ) as sim:
             truth = sim.ready["truth_url"]
             url = f"udpin://127.0.0.1:{14540 + instance}"
-            with MavsdkVehicle(
-                MavsdkConfig(url=url, expected_system_id=system_id, clock="vehicle")
+            with MavsdkVehicle(  # paced, as missions are: the world waits while the test does
+                MavsdkConfig(url=url, expected_system_id=system_id, clock="vehicle"), pacer=sim.pace
             ) as mavsdk:
                 vehicle = SafeVehicle(mavsdk)
                 vehicle.connect(20.0)

@@ -83,6 +83,8 @@ class BenchmarkConfig:
     """Run the missions on Ray: "local" (a private local Ray of `parallel` CPUs) or a cluster's address."""
     rerun: bool = False
     """Record each mission as `mission.rrd` in its report folder (needs a report folder to keep)."""
+    warm: bool = True
+    """Keep a simulated MAVLink vehicle warm between missions, reset for each (False: a fresh one each)."""
 
     @classmethod
     def of(cls, mission: dict[str, Any] | None = None, **sampling: Any) -> BenchmarkConfig:

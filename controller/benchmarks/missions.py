@@ -17,6 +17,7 @@ said "not in view" of a detection of the named target, present and absent ones a
 
 from __future__ import annotations
 
+import atexit
 import json
 import logging
 import statistics
@@ -32,7 +33,7 @@ from controller.benchmarks.mission_plan import ABSENT_TAG, BenchmarkConfig, benc
 from controller.missions.kits.base import LoadedModels
 from controller.missions.report import REPORT_JSON, claim_report_dir
 from controller.missions.results import MissionResult
-from controller.missions.schema import Mission, parse_mission
+from controller.missions.schema import ARDUPILOT_SITL, PX4_SITL, SIM_MAVLINK, Mission, parse_mission
 from controller.missions.suite import failed_to_start
 from drone_inspect_core.files import release_claim
 from drone_inspect_core.parallel import gather, task_executor
@@ -42,6 +43,8 @@ log = logging.getLogger(__name__)
 
 
 def _load_models(config: BenchmarkConfig) -> LoadedModels:
+    """The models every mission of the benchmark shares, and the simulator it keeps warm (a simulated
+    MAVLink vehicle, reset for each mission: `controller.missions.kits.warm`) unless told not to."""
     from controller.planning.planners import LatentPlannerAdapter
     from perception.image_detector import ImageDetector
 
@@ -51,13 +54,22 @@ def _load_models(config: BenchmarkConfig) -> LoadedModels:
     if base.detector == "image":
         path = base.detector_checkpoint
         detector = ImageDetector.shipped() if path is None else ImageDetector.load(path)
+    simulators = None
+    if config.warm and base.vehicle in WARM_VEHICLES:
+        from controller.missions.kits.warm import WarmSimulators
+
+        simulators = WarmSimulators()
     return LoadedModels(
         detector=detector,
         latent=latent,
         latent_checkpoint=base.checkpoint,
         detector_checkpoint=base.detector_checkpoint,
+        simulators=simulators,
     )
 
+
+WARM_VEHICLES = (SIM_MAVLINK, PX4_SITL, ARDUPILOT_SITL)
+"""The simulated vehicles a benchmark keeps warm between missions (`BenchmarkConfig.warm`)."""
 
 MISSION_RRD = "mission.rrd"
 """A mission's Rerun recording in its report folder (`rerun=True`)."""
@@ -70,7 +82,9 @@ def _init_worker(config: BenchmarkConfig) -> None:
     import torch
 
     torch.set_num_threads(1)
-    _WORKER_MODELS["models"] = _load_models(config)
+    models = _WORKER_MODELS["models"] = _load_models(config)
+    if models.simulators is not None:  # the worker's warm simulator ends with the worker
+        atexit.register(models.simulators.close)
 
 
 def _fly(
@@ -110,10 +124,14 @@ def run_benchmark(
         with task_executor(config.parallel, config.ray, _init_worker, (config,)) as pool:
             if pool is None:
                 models = _load_models(config)
-                results = [
-                    _fly(mission, path, models, config.rerun)
-                    for mission, path in tqdm(runs, desc="missions", unit="mission")
-                ]
+                try:
+                    results = [
+                        _fly(mission, path, models, config.rerun)
+                        for mission, path in tqdm(runs, desc="missions", unit="mission")
+                    ]
+                finally:
+                    if models.simulators is not None:
+                        models.simulators.close()
             else:
                 futures = [pool.submit(_fly, m, p, None, config.rerun) for m, p in runs]
                 with tqdm(total=len(futures), desc="missions", unit="mission") as bar:
@@ -198,9 +216,10 @@ def summarise(config: BenchmarkConfig, results: list[MissionResult], wall_s: flo
         ready = [
             r.vehicle_clock_s["ready_s"] - r.info[offset]
             for r in results
-            if "ready_s" in r.vehicle_clock_s and offset in r.info
+            if "ready_s" in r.vehicle_clock_s and offset in r.info and r.info.get("warm_missions", 1) == 1
         ]
         if ready:  # SITL: simulated seconds from the bridge's start to the estimator seen ready by the client
+            # (missions that started their autopilot: a warm one, reset between missions, is ready at once)
             summary[f"{autopilot}_ready_sim_s"] = {
                 "mean": round(statistics.fmean(ready), 2),
                 "max": round(max(ready), 2),

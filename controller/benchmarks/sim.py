@@ -4,9 +4,15 @@ Measures, in order:
 - physics real-time factor without a camera: takeoff, then hover and body-velocity
   moves through the autopilot at the physics rate (240 Hz);
 - the same flight with the forward camera rendering at 30 Hz (224×224, noise on,
-  no segmentation mask, as a flight camera would), in both render modes side by side
-  (`single`: inline; `workers`: two render processes), the load average before and
-  after each; and the mode `auto` picks on this machine now (`render_mode`);
+  no segmentation mask, as a flight camera would), in both render modes in turns
+  (`single`: inline; `workers`: two render processes; `camera_rounds` flights each), the
+  load average before and after each; and the mode `auto` picks on this machine now
+  (`render_mode`: calibrated in four rounds of each mode in turns), and whether it was the
+  faster in the full flights (within `WORKERS_MARGIN`, auto's own tie);
+- with `peer_python` (an interpreter that has PyFlyt, the optional extra `[peer]`): the peer's camera
+  world, a PyFlyt QuadX hovering with its 224×224 camera at 30 fps (`pyflyt_peer.py`, run in that
+  interpreter between the two modes), and this world's real-time factor in the mode `auto` picked
+  over the peer's (`peer`);
 - render time per frame at 96, 128 and 224 px, with and without the mask (p50, p99);
 - collection throughput at 224 px with the default worker count.
 
@@ -18,6 +24,7 @@ processes for a measurement under load.
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import os
 import resource
@@ -34,12 +41,12 @@ import numpy as np
 
 from sim_world.collection.collect import CollectConfig, collect
 from sim_world.rendering.camera import CameraConfig
-from sim_world.rendering.render_mode import CameraFeed, calibrate, choose_render_mode
+from sim_world.rendering.render_mode import WORKERS_MARGIN, CameraFeed, calibrate, choose_render_mode
 from sim_world.world import World, WorldConfig
 
 logger = logging.getLogger(__name__)
 
-TARGETS = {"physics_rtf": 20.0, "camera_rtf": 3.0, "collect_images_per_s": 50.0}
+TARGETS = {"physics_rtf": 20.0, "camera_rtf": 3.0, "collect_images_per_s": 50.0, "over_peer": 2.0}
 """The targets of the project's issue for this 2-core machine."""
 
 # (seconds, forward, right, down) body-velocity legs after takeoff; None = hold.
@@ -67,6 +74,11 @@ class SimBenchSettings:
     render_workers: int = 2
     render_mode: str = "auto"
     """What `choose_render_mode` is asked for (the bench measures both modes whatever it picks)."""
+    peer_python: Path | None = None
+    """An interpreter with PyFlyt installed: measure the peer's camera world too (None: skip it)."""
+    peer_seconds: float = 10.0
+    camera_rounds: int = 2
+    """Full camera flights per render mode, the modes in turns."""
 
 
 def _fly(
@@ -157,6 +169,30 @@ def measure_render_ms(settings: SimBenchSettings) -> dict[str, dict[str, float]]
     return out
 
 
+def _mean_of_rounds(runs: list[dict[str, float]]) -> dict[str, Any]:
+    """One mode's figures over its rounds: the means, and each round's real-time factor."""
+    mean = {key: float(np.mean([run[key] for run in runs])) for key in runs[0]}
+    return {**mean, "rounds_real_time_factor": [run["real_time_factor"] for run in runs]}
+
+
+PEER_SCRIPT = Path(__file__).with_name("pyflyt_peer.py")
+
+
+def measure_peer(settings: SimBenchSettings) -> dict[str, Any]:
+    """The peer's camera world (`pyflyt_peer.py` in `settings.peer_python`): its real-time factor, or
+    `{"error": ...}` when it cannot run there."""
+    assert settings.peer_python is not None
+    command = [str(settings.peer_python), str(PEER_SCRIPT), "--seconds", str(settings.peer_seconds)]
+    try:
+        done = subprocess.run(command, capture_output=True, text=True, timeout=600, check=False)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return {"error": f"{command[0]}: {exc}"}
+    lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
+    if not lines:
+        return {"error": f"the peer printed no result (exit {done.returncode}): {done.stderr[-500:]}"}
+    return {**json.loads(lines[-1]), "python": str(settings.peer_python)}
+
+
 def _cpu_s_with_children() -> float:
     """CPU time of this process and of its finished (waited-for) children."""
     own = resource.getrusage(resource.RUSAGE_SELF)
@@ -200,14 +236,33 @@ def run_sim_bench(settings: SimBenchSettings) -> dict[str, Any]:
     choice = choose_render_mode(
         settings.render_mode,
         lambda: calibrate(
-            config, settings.seed, camera_hz=settings.camera_hz, workers=settings.render_workers
+            config, settings.seed, camera_hz=settings.camera_hz, workers=settings.render_workers, rounds=4
         ),
     )
     physics = measure_flight_rtf(settings, camera="none")
-    camera = measure_flight_rtf(settings, camera="single")
-    parallel = measure_flight_rtf(settings, camera="workers")
+    # The two modes in turns (single, workers, workers, single), the peer between the two rounds, so
+    # that a change in the machine's other load weighs on every figure alike.
+    rounds: dict[str, list[dict[str, float]]] = {"single": [], "workers": []}
+    peer = None
+    for r in range(settings.camera_rounds):
+        for mode in ("single", "workers") if r % 2 == 0 else ("workers", "single"):
+            rounds[mode].append(measure_flight_rtf(settings, camera=mode))
+        if r == 0 and settings.peer_python is not None:
+            peer = measure_peer(settings)
+    camera, parallel = (_mean_of_rounds(rounds[mode]) for mode in ("single", "workers"))
     render = measure_render_ms(settings)
     collection = measure_collection(settings)
+    by_mode = {"single": camera["real_time_factor"], "workers": parallel["real_time_factor"]}
+    faster = max(by_mode, key=lambda mode: by_mode[mode])
+    picked = {
+        "mode": choice.mode,
+        "real_time_factor": by_mode[choice.mode],
+        "faster_mode": faster,
+        # auto keeps the single process unless the workers are WORKERS_MARGIN faster: within it, a tie
+        "picked_the_faster": by_mode[choice.mode] * WORKERS_MARGIN >= by_mode[faster],
+    }
+    if peer is not None and "real_time_factor" in peer:
+        peer["ours_over_peer"] = picked["real_time_factor"] / peer["real_time_factor"]
     return {
         "machine": {
             "cpus": os.cpu_count(),
@@ -217,7 +272,8 @@ def run_sim_bench(settings: SimBenchSettings) -> dict[str, Any]:
         "physics_no_camera": physics,
         "physics_camera": {**camera, "camera_hz": settings.camera_hz, "camera_px": settings.camera_size_px},
         "physics_camera_render_workers": {**parallel, "workers": settings.render_workers},
-        "render_mode": choice.as_dict(),
+        "render_mode": {**choice.as_dict(), "full_flight": picked},
+        "peer": peer,
         "render_ms": render,
         "collection_224": collection,
         "targets": TARGETS,

@@ -10,8 +10,10 @@ The flight passes when every instruction the mission planned was flown and passe
 
 from __future__ import annotations
 
+import time
 from typing import TYPE_CHECKING, Any
 
+from controller.missions.phases import flight_phases
 from controller.missions.results import (
     InstructionResult,
     MissionResult,
@@ -135,6 +137,7 @@ def finish_flight(session: FlightSession) -> MissionResult:
     start, end = session.vehicle_start_s, session.vehicle_end_s
     vehicle_s = max(0.0, end - start) if start is not None and end is not None else 0.0
     wall_s = session.wall_s
+    phases = flight_phases(session.milestones_wall_s, [s.timing for r in results for s in r.records])
     summary: dict[str, Any] = {
         "outcome": outcome.value,
         "message": message,
@@ -153,12 +156,15 @@ def finish_flight(session: FlightSession) -> MissionResult:
         "wall_s": round(wall_s, 3),
         "vehicle_s": round(vehicle_s, 3),
         "vehicle_clock_s": {name: round(value, 3) for name, value in session.vehicle_clock_s.items()},
+        "phases_wall_s": phases,
         "truth_extremes": kit.truth_extremes() if kit.truth_extremes is not None else None,
         "error": error,
     }
     if kit.tlog is not None and kit.tlog.recording_error is not None:
         writer.recording_errors.append(f"flight.tlog: {kit.tlog.recording_error}")
+    report_start = time.perf_counter()
     final = writer.finish(summary, None if kit.tlog is None else kit.tlog.path)
+    phases["report"] = round(time.perf_counter() - report_start, 4)
     return MissionResult(
         name=session.mission.name,
         planner=kit.planner.name,
@@ -187,6 +193,7 @@ def finish_flight(session: FlightSession) -> MissionResult:
         recording_errors=tuple(final["recording_errors"]),
         report_written=final["report_written"],
         instructions=tuple(r.summary() for r in results),
+        phases_s=phases,
     )
 
 

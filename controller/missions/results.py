@@ -56,6 +56,8 @@ class MissionResult:
     """What could not be written (a full disk, a read-only folder): the flight went on without it."""
     report_written: bool = True
     """Whether report.json holds the final state (False: only the console has the outcome)."""
+    phases_s: dict[str, float] = field(default_factory=dict)
+    """Wall seconds per phase of the mission (`controller.missions.phases.PHASES`, the loop's parts)."""
     instructions: tuple[dict[str, Any], ...] = ()
     """Each instruction of the flight, in order (`InstructionResult.summary()`: its outcome, steps, moves,
     final offsets, wrong target, judgement). The fields above are the flight's: `outcome` the first

@@ -65,7 +65,7 @@ from controller.planning.loop import CentringLoop
 from controller.planning.loop_records import CentringConfig, Outcome, StepRecord
 from drone_inspect_core.frames import world_ned_to_heading
 from drone_inspect_core.signing import SigningKey
-from flight.moves import fly_offset, take_off_to_start
+from flight.moves import Milestones, fly_offset, take_off_to_start
 from flight.safe_vehicle import SafeVehicle
 from flight.safety import SafetyLimits, safe_stop
 from flight.signals import StopRequested
@@ -142,7 +142,10 @@ class FlightSession:
         self.flying_the_plan = False
         """`fly()` flies the mission's instructions: one it did not reach counts as not flown."""
         self._errors: list[str] = []
-        self._clock: dict[str, float] = {}
+        self._clock = Milestones()
+        """Milestones on the vehicle's clock, each also on the wall clock (the phases of `phases_s`)."""
+        self.kit_open_s = 0.0
+        """Wall seconds the kit took to open (a simulator started, MAVSDK and the camera opened)."""
         self.vehicle_start_s: float | None = None  # vehicle clock, after the first take-off
         self.vehicle_end_s: float | None = None  # vehicle clock, when the last centring ended
         self.start_position: PositionNed | None = None
@@ -159,6 +162,8 @@ class FlightSession:
             kit = self._given_kit or self._stack.enter_context(
                 open_kit(self.mission, self.out_dir, self.limits, self._models, self._signing_key)
             )
+            self.kit_open_s = time.perf_counter() - self._wall_start
+            self._clock = Milestones()  # the flight's wall times count from here
             self.kit = replace(kit, epsilon_px=epsilon_for(self.mission, kit))  # ε resolved once, here
             # A kit may bring its vehicle already behind the safety limits (the in-process sim does).
             safe = (
@@ -201,7 +206,12 @@ class FlightSession:
             try:
                 self.result = finish_flight(self)
             finally:
+                closing = time.perf_counter()
                 self._stack.close()
+                if self.result is not None:  # the phases before and after the flight (`phases`)
+                    phases = {"start": self.kit_open_s, **self.result.phases_s}
+                    phases["close"] = time.perf_counter() - closing
+                    self.result = replace(self.result, phases_s={k: round(v, 4) for k, v in phases.items()})
 
     def _plan(self) -> list[tuple[MissionInstruction, TargetQuery]]:
         """The mission's instructions with what each names (the scene's resolved one where it gives none);
@@ -279,8 +289,14 @@ class FlightSession:
 
     @property
     def vehicle_clock_s(self) -> dict[str, float]:
-        """Milestones on the vehicle's clock: connected_s, ready_s, offboard_s (the first take-off's)."""
+        """Milestones on the vehicle's clock: connected_s, ready_s, offboard_s (the first take-off's),
+        loop_end_s (the last centring's end), landed_s (the last landing's)."""
         return dict(self._clock)
+
+    @property
+    def milestones_wall_s(self) -> dict[str, float]:
+        """The same milestones on the wall clock, in seconds since the kit was open."""
+        return dict(self._clock.wall_s)
 
     @property
     def wall_s(self) -> float:
@@ -328,7 +344,8 @@ class FlightSession:
             return
         self._safe.connect()
         self._connected = True
-        self._clock.setdefault("connected_s", self._safe.time_s())
+        if "connected_s" not in self._clock:
+            self._clock["connected_s"] = self._safe.time_s()
 
     def take_off(self) -> None:
         """Connect, ready, arm, take off to the start and hover in offboard (see the module docstring)."""
@@ -341,10 +358,9 @@ class FlightSession:
             self._phase = Phase.TAKING_OFF
             try:
                 altitude_m = self.kit.takeoff_altitude_m or self.mission.takeoff_altitude_m
-                clock: dict[str, float] = {}
+                # The first take-off's milestones are the flight's; a later one's are not kept.
+                clock = self._clock if "offboard_s" not in self._clock else {}
                 take_off_to_start(vehicle, altitude_m, self.kit.place_at_start, clock)
-                for key, value in clock.items():
-                    self._clock.setdefault(key, value)
                 self._offboard = True
                 if self.vehicle_start_s is None:
                     self.vehicle_start_s = self._safe.time_s()
@@ -431,7 +447,7 @@ class FlightSession:
             outcome = Outcome.STOPPED
             message = f"stopped by the operator ({self._interrupt or 'stop'}); the vehicle holds"
         finally:
-            self.vehicle_end_s = self._safe.time_s()
+            self.vehicle_end_s = self._clock["loop_end_s"] = self._safe.time_s()
             judged = judge_instruction(
                 self, index, entry, query, loop.steps, outcome, message, error,
                 wall_s=time.perf_counter() - wall_start, vehicle_s=self.vehicle_end_s - vehicle_start_s,
@@ -545,6 +561,7 @@ class FlightSession:
                 self._offboard = False
             self._safe.land()
             self._safe.disarm()
+            self._clock["landed_s"] = self._safe.time_s()
         except Exception as exc:  # the landing itself failed: the safe stop's best effort, then say it
             if self._phase is Phase.KILLED:  # a Kill under the landing ended it: nothing left to land
                 return

@@ -20,6 +20,7 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
+from controller.missions.kits.base import LoadedModels, shared_models
 from controller.missions.report import claim_report_dir
 from controller.missions.results import MissionResult
 from controller.missions.schema import (
@@ -69,17 +70,25 @@ class SuiteResult:
         return [r for r in self.results if not r.passed]
 
 
-def _fly_one(mission: Mission, out_dir: Path, threads: int) -> MissionResult:
-    """One mission in a worker (or in this process); never raises for a mission that fails."""
+_WORKER_MODELS: dict[str, LoadedModels] = {}
+"""A worker process's models, loaded once by `_init_worker` (the pool's initializer)."""
+
+
+def _init_worker(missions: list[Mission], threads: int) -> None:
+    import torch
+
+    torch.set_num_threads(threads)
+    _WORKER_MODELS["models"] = shared_models(missions)
+
+
+def _fly_one(mission: Mission, out_dir: Path, models: LoadedModels | None = None) -> MissionResult:
+    """One mission in a worker (or in this process), with the models its process shares; never raises
+    for a mission that fails."""
     from controller.missions.runner import run_mission
 
-    if threads:
-        import torch
-
-        torch.set_num_threads(threads)
     start = time.perf_counter()
     try:
-        return run_mission(mission, out_dir)
+        return run_mission(mission, out_dir, models=models or _WORKER_MODELS.get("models"))
     except Exception as exc:  # could not start: a failed row with the reason
         log.error("mission %s could not fly: %s", mission.name, exc)
         return failed_to_start(mission, f"{type(exc).__name__}: {exc}", time.perf_counter() - start)
@@ -162,12 +171,14 @@ def run_suite(directory: str | Path, options: SuiteOptions) -> SuiteResult:
     release_claim(out)
     results: dict[str, MissionResult] = {}
     if options.parallel == 1:
+        models = shared_models(missions)  # loaded once, not once a mission
         for mission in missions:
-            results[mission.name] = _fly_one(mission, out / mission.name, threads=0)
+            results[mission.name] = _fly_one(mission, out / mission.name, models)
             _log_row(results[mission.name])
     else:
-        with ProcessPoolExecutor(options.parallel, mp_context=get_context("spawn")) as pool:
-            futures = {pool.submit(_fly_one, m, out / m.name, 1): m for m in missions}
+        context = get_context("spawn")
+        with ProcessPoolExecutor(options.parallel, context, _init_worker, (missions, 1)) as pool:
+            futures = {pool.submit(_fly_one, m, out / m.name): m for m in missions}
             for future in as_completed(futures):
                 result = future.result()
                 results[result.name] = result

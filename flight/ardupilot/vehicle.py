@@ -47,6 +47,7 @@ from flight.errors import (
     OffboardInterruptedError,
     VehicleConnectionError,
 )
+from flight.pacing import Pacer
 from flight.pymavlink_link import CommandAck, MavlinkLink
 from flight.types import FlightMode, Telemetry, VelocityBody
 from flight.vehicle import Deadline, Vehicle, wait_for
@@ -62,6 +63,8 @@ _VELOCITY_YAWRATE_MASK = 0b0000_0101_1100_0111  # 1479: use velocity and yaw rat
 READY_REPORT_EVERY_S = 5.0
 DISARM_RACE_WAIT_S = 3.0
 FORCE_DISARM = 21196.0
+PACE_EVERY_S = 0.05
+"""How often (the vehicle's clock) a wait calls the pacer, well inside a paced simulator's lead (0.1 s)."""
 
 
 class ArduPilotVehicle(Vehicle):
@@ -69,8 +72,13 @@ class ArduPilotVehicle(Vehicle):
 
     realtime = True
 
-    def __init__(self, config: ArduPilotConfig | None = None) -> None:
+    def __init__(
+        self, config: ArduPilotConfig | None = None, pacer: Callable[[], None] | None = None
+    ) -> None:
+        """`pacer`: a lockstepped simulator's pace (`flight.pacing.Pacer`): called while a wait polls the
+        vehicle's clock, every `PACE_EVERY_S` of it, and while a command awaits its answer."""
         self.config = config or ArduPilotConfig()
+        self._pacer = Pacer(pacer, PACE_EVERY_S)
         self.state = ArduPilotState()
         self.setpoints_sent = 0
         self._link: MavlinkLink | None = None
@@ -178,6 +186,13 @@ class ArduPilotVehicle(Vehicle):
             except Exception:  # the thread must not die silently while the vehicle flies
                 log.exception("ArduPilot service tick failed")
 
+    def new_flight(self) -> None:
+        """Forget what the last flight left (GUIDED setpoints, the ground height) for a vehicle reset
+        beneath this connection (a simulator kept warm between missions)."""
+        self._offboard = False
+        self._setpoint, self._setpoint_set = VelocityBody(), False
+        self._ground_down_m = math.nan
+
     # --- telemetry and clock ------------------------------------------------------------------
     def telemetry(self) -> Telemetry:
         self._require_link("telemetry()").monitor.check("telemetry()")
@@ -200,8 +215,9 @@ class ArduPilotVehicle(Vehicle):
             time.sleep(max(0.0, seconds))
             return
         until = self.time_s() + seconds
-        while self.time_s() < until:
+        while (now_s := self.time_s()) < until:
             self._require_link("sleep()").monitor.check("sleep()")  # a frozen clock ends here, as a lost link
+            self._pacer.tick(now_s)
             time.sleep(0.002)
 
     def _wait(
@@ -368,7 +384,8 @@ class ArduPilotVehicle(Vehicle):
             self.sleep(self.config.poll_s)
 
     def _command(self, command: int, params: tuple[float, ...], origin: str) -> CommandAck:
-        return self._require_link(origin).command(*self._target, command, params, origin=origin)
+        with self._pacer.blocked():
+            return self._require_link(origin).command(*self._target, command, params, origin=origin)
 
     def _require_link(self, origin: str) -> MavlinkLink:
         if self._link is None:

@@ -55,6 +55,11 @@ class MavsdkConfig:
     shown_url: str | None = None
     """The vehicle's URL as the user gave it, for messages, when MAVSDK listens behind a relay elsewhere."""
     clock: str = "wall"  # or "vehicle": the autopilot's clock (see the module docstring)
+    offboard_stream_period_s: float = 0.05
+    """`clock="vehicle"`, in offboard: waits send the last setpoint again every this many seconds of the
+    vehicle's clock. MAVSDK re-sends it at 20 Hz of wall time, which a vehicle k times faster than real
+    time sees at 20/k Hz (PX4 wants more than 2 Hz), and a lockstepped sim-vehicle advances only as
+    setpoints arrive: a stream on its own clock keeps both as at ×1."""
 
     def __post_init__(self) -> None:
         validate_connection_url(self.url)
@@ -64,6 +69,8 @@ class MavsdkConfig:
             raise ValueError(f"MavsdkConfig.expected_system_id must be 1..255, got {self.expected_system_id}")
         if not (self.link_timeout > 0 and self.arm_retry_period_s > 0 and self.poll_s > 0):
             raise ValueError("MavsdkConfig: link_timeout_s, arm_retry_period_s and poll_s must be > 0")
+        if not self.offboard_stream_period_s > 0:
+            raise ValueError("MavsdkConfig: offboard_stream_period_s must be > 0")
 
     @property
     def link_timeout(self) -> float:
@@ -116,7 +123,12 @@ def route_mavsdk_logs() -> None:
 class TelemetryCache:
     """The latest of every telemetry stream the backend reads, stored by MAVSDK's callback thread."""
 
-    def __init__(self, link_timeout_s: float, connection_state: bool = True) -> None:
+    def __init__(
+        self,
+        link_timeout_s: float,
+        connection_state: bool = True,
+        peer_alive: Callable[[], bool] | None = None,
+    ) -> None:
         self.lock = threading.Lock()
         self.position: tuple[float, float, float] = _NAN3
         self.velocity: tuple[float, float, float] = _NAN3
@@ -130,7 +142,7 @@ class TelemetryCache:
         self.texts = StatusTexts()
         self.vehicle_time_s = math.nan  # the autopilot's clock, from its ATTITUDE timestamps
         self.forward_range_m: float | None = None
-        self.link = LinkMonitor(link_timeout_s, connection_state=connection_state)
+        self.link = LinkMonitor(link_timeout_s, connection_state=connection_state, peer_alive=peer_alive)
 
     def subscribe(self, system: Any, tel: MavsdkTelemetry) -> None:
         def store(fn: Callable[[Any], None]) -> Callable[[Any, Any], None]:

@@ -16,7 +16,8 @@ Written for real PX4 (SITL or hardware) as much as for `dronectl sim-vehicle`:
   (the per-run identity of a vehicle the caller launched) and refuse any other;
 - `clock="vehicle"`: `time_s()`/`sleep()` follow the autopilot's own clock (the
   `time_boot_ms` of its ATTITUDE stream) instead of the wall clock, for a simulated
-  autopilot running faster or slower than real time in lockstep (PX4 SITL).
+  autopilot running faster or slower than real time in lockstep (PX4 SITL); in offboard
+  a wait then also streams the last setpoint on that clock (`offboard_stream_period_s`).
 
 MAVSDK's sync callbacks all run on one MAVSDK thread, and blocking calls return
 through it: the callbacks here only store values under a lock.
@@ -24,6 +25,7 @@ through it: the callbacks here only store values under a lock.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
@@ -44,6 +46,7 @@ from flight.errors import (
     VehicleConnectionError,
 )
 from flight.mavsdk.link import MavsdkConfig, TelemetryCache, resend_on_timeout, route_mavsdk_logs
+from flight.pacing import Pacer
 from flight.types import Closable, FlightMode, Telemetry, VelocityBody
 from flight.vehicle import Deadline, Vehicle, wait_for
 
@@ -63,10 +66,21 @@ class MavsdkVehicle(Vehicle):
 
     realtime = True
 
-    def __init__(self, config: MavsdkConfig | None = None, link: Closable | None = None) -> None:
-        """`link`: what carries the connection and goes with it (a relay in front of MAVSDK), closed last."""
+    def __init__(
+        self,
+        config: MavsdkConfig | None = None,
+        link: Closable | None = None,
+        pacer: Callable[[], None] | None = None,
+        peer_alive: Callable[[], bool] | None = None,
+    ) -> None:
+        """`link`: what carries the connection and goes with it (a relay in front of MAVSDK), closed last.
+        `pacer`: a lockstepped simulator's pace (`flight.pacing.Pacer`): called while a wait polls the
+        vehicle's clock, every `offboard_stream_period_s` of it, and while a command awaits its answer.
+        `peer_alive`: a simulator this process started: whether its process runs (`flight.link`)."""
         self.config = config or MavsdkConfig()
         self._link = link
+        self._pacer = Pacer(pacer, self.config.offboard_stream_period_s)
+        self._peer_alive = peer_alive
         self.setpoints_sent = 0
         self._cache = TelemetryCache(self.config.link_timeout)
         self._texts_at_offboard = 0  # the STATUSTEXT count when offboard was confirmed
@@ -113,7 +127,11 @@ class MavsdkVehicle(Vehicle):
             )
         # A lockstep simulator's heartbeat comes once a second of its own time: MAVSDK's wall-clock
         # heartbeat timeout says nothing about it (`flight.link`); its silence does.
-        self._cache = TelemetryCache(self.config.link_timeout, connection_state=self.config.clock == "wall")
+        self._cache = TelemetryCache(
+            self.config.link_timeout,
+            connection_state=self.config.clock == "wall",
+            peer_alive=self._peer_alive,
+        )
         # Keep every MAVSDK object referenced for the connection's life: a plugin left to the
         # garbage collector is destroyed with its subscriptions, and telemetry silently stops.
         self._system = system
@@ -192,9 +210,24 @@ class MavsdkVehicle(Vehicle):
             time.sleep(max(0.0, seconds))
             return
         until = self.time_s() + seconds
-        while self.time_s() < until:
+        next_setpoint_s = self.time_s() + self.config.offboard_stream_period_s
+        while (now_s := self.time_s()) < until:
             self._cache.link.check("sleep()")  # a frozen vehicle clock ends here, as a lost link
+            self._pacer.tick(now_s)
+            if self._in_offboard and now_s >= next_setpoint_s and self._offboard is not None:
+                next_setpoint_s = now_s + self.config.offboard_stream_period_s
+                self._stream_setpoint()
             time.sleep(0.002)
+
+    def _stream_setpoint(self) -> None:
+        """The last setpoint again, on the vehicle's clock (`MavsdkConfig.offboard_stream_period_s`);
+        a refusal here is left to the next command, which reports it."""
+        assert self._offboard is not None
+        v = self._last_setpoint
+        with contextlib.suppress(OffboardError):
+            self._offboard.set_velocity_body(
+                VelocityBodyYawspeed(v.forward_m_s, v.right_m_s, v.down_m_s, v.yawspeed_deg_s)
+            )
 
     def _wait(
         self, predicate: Callable[[Telemetry], bool], timeout_s: float, origin: str, what: str
@@ -237,7 +270,8 @@ class MavsdkVehicle(Vehicle):
         while True:
             self._cache.link.check("arm()")
             try:
-                action.arm()
+                with self._pacer.blocked():
+                    action.arm()
                 break
             except ActionError as exc:
                 if exc.result not in _RETRY_ARM or deadline.remaining_s() < self.config.arm_retry_period_s:
@@ -253,8 +287,9 @@ class MavsdkVehicle(Vehicle):
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise ValueError(f"takeoff altitude must be a positive number of metres, got {altitude_m!r}")
         try:
-            resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m), self._cache.link)
-            resend_on_timeout(action.takeoff, self._cache.link)
+            with self._pacer.blocked():
+                resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m), self._cache.link)
+                resend_on_timeout(action.takeoff, self._cache.link)
         except ActionError as exc:
             armed = self.telemetry().armed
             detail = self._last_text() or ("the vehicle is not armed" if not armed else "")
@@ -313,7 +348,8 @@ class MavsdkVehicle(Vehicle):
                 self.set_velocity_body(self._last_setpoint)
                 self.sleep(0.05)
             try:
-                resend_on_timeout(offboard.start)
+                with self._pacer.blocked():
+                    resend_on_timeout(offboard.start)
                 break
             except OffboardError as exc:
                 if exc.result.name == "TIMEOUT":  # a vehicle gone silent is a lost link, not a refusal
@@ -333,7 +369,8 @@ class MavsdkVehicle(Vehicle):
         self._in_offboard = False
         action = self._require(self._action, "hold()")
         try:
-            resend_on_timeout(action.hold, self._cache.link)
+            with self._pacer.blocked():
+                resend_on_timeout(action.hold, self._cache.link)
         except ActionError as exc:
             raise CommandDeniedError("hold()", exc.result.name, self._last_text()) from None
         self._confirm_mode(FlightMode.HOLD, None, "hold()")
@@ -344,7 +381,8 @@ class MavsdkVehicle(Vehicle):
         if self.telemetry().flight_mode != FlightMode.OFFBOARD:
             return
         try:
-            resend_on_timeout(offboard.stop, self._cache.link)
+            with self._pacer.blocked():
+                resend_on_timeout(offboard.stop, self._cache.link)
         except OffboardError as exc:
             raise CommandDeniedError("stop_offboard()", exc.result.name, self._last_text()) from None
         self._confirm_mode(FlightMode.HOLD, timeout_s, "stop_offboard()")
@@ -355,7 +393,8 @@ class MavsdkVehicle(Vehicle):
             self.stop_offboard()
         self._in_offboard = False
         try:
-            resend_on_timeout(action.land, self._cache.link)
+            with self._pacer.blocked():
+                resend_on_timeout(action.land, self._cache.link)
         except ActionError as exc:
             raise CommandDeniedError("land()", exc.result.name, self._last_text()) from None
         self._wait(lambda t: not t.in_air, timeout_s or self.config.timeouts.land_s, "land()", "landed state")
@@ -385,7 +424,8 @@ class MavsdkVehicle(Vehicle):
         if not self.telemetry().armed:
             return
         try:
-            resend_on_timeout(action.disarm, self._cache.link)
+            with self._pacer.blocked():
+                resend_on_timeout(action.disarm, self._cache.link)
         except ActionError as exc:
             # PX4's auto-disarm may have won the race (its ack lost, or telemetry a heartbeat late):
             # that is success, so give telemetry a moment to say so before calling it a failure.
@@ -418,6 +458,14 @@ class MavsdkVehicle(Vehicle):
                     origin, mode.name, f"{observed.name} ({self._last_text()!r})", timeout_s
                 )
             self.sleep(self.config.poll_s)
+
+    def new_flight(self) -> None:
+        """Forget what the last flight left (offboard, its setpoint, the ground height) for a vehicle
+        reset beneath this connection (a simulator kept warm between missions)."""
+        self._in_offboard = False
+        self._setpoint_set = False
+        self._last_setpoint = VelocityBody()
+        self._ground_down_m = math.nan
 
     # --- diagnostics and teardown -------------------------------------------------------------
     def command_round_trip_s(self) -> float:

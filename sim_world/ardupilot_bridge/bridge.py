@@ -17,6 +17,10 @@ A packet with the frame number already answered is ArduPilot re-sending (our ans
 late): it gets the same answer again and the world does not step. A frame number that goes back
 means ArduPilot restarted: refused (`ArduPilotRestartedError`), since its estimator would begin on a
 vehicle already in flight.
+
+Kept warm between missions, `rebase(world, origin)` puts the next mission's world (freshly built)
+behind the running ArduPilot, shown through an `AutopilotFrame` in which the new start is where and
+when ArduPilot last saw the drone: its EKF (ready after ~40 simulated seconds from boot) runs on.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,8 +39,9 @@ from sim_world.ardupilot_bridge.link import ArduPilotSilentError, JsonPhysicsSer
 from sim_world.ardupilot_bridge.motors import PwmToRotor
 from sim_world.ardupilot_bridge.protocol import ServoPacket, state_json
 from sim_world.px4_bridge.messages import quaternion_wxyz
-from sim_world.sitl.imu import ImuModel
-from sim_world.sitl.rig import CameraClock, TruthReader
+from sim_world.sitl.frame import AutopilotFrame
+from sim_world.sitl.imu import ImuModel, Truth
+from sim_world.sitl.rig import CameraClock, LockstepPace, TruthReader, continue_in, run_lockstep
 from sim_world.world import World
 
 log = logging.getLogger(__name__)
@@ -117,6 +123,11 @@ class ArduPilotBridge:
                 f"{self.timing.frame_period_s * 1000:.2f} ms"
             )
         self._truth = TruthReader(world, self.origin_enu_m, self.timing.frame_period_s)
+        self.frame = AutopilotFrame()
+        self.last_truth: Truth | None = None
+        """What ArduPilot was last told (its frame)."""
+        self.rebased_at_s: float | None = None
+        """ArduPilot's clock (the timestamps it is sent, s) when the last `rebase`'s world began."""
         self._last_frame: int | None = None
         self._last_reply = b""
         self._range_m = math.inf
@@ -130,23 +141,40 @@ class ArduPilotBridge:
         with self._stats_lock:
             return JsonBridgeStats(**vars(self._stats))
 
+    def rebase(self, world: World, origin_enu_m: np.ndarray) -> None:
+        """Fly `world` (a fresh build, the drone landed and still) from the next frame on, shown to
+        ArduPilot as the continuation of what it last saw; the old world is the caller's."""
+        # The next reply comes one frame after the new world's start, one frame after the last one sent.
+        last = self.last_truth
+        next_time_s = 0.0 if last is None else last.time_s
+        period_s = self.timing.frame_period_s
+        reader, self.frame = continue_in(world, origin_enu_m, period_s, last, next_time_s, self.camera)
+        self.world, self.origin_enu_m, self._truth = world, origin_enu_m, reader
+        self._next_idle_frame_s = 0.0
+        self.rebased_at_s = next_time_s + period_s  # ArduPilot's clock: the next reply's timestamp
+
     # --------------------------------------------------------------------- loop
-    def run(self, stop: threading.Event, max_sim_s: float | None = None) -> JsonBridgeStats:
-        """Lockstep until `stop`, `max_sim_s` of simulated time, or ArduPilot goes silent (raised)."""
-        timing = self.timing
-        wall0, sim0 = time.monotonic(), self.world.time_s
-        self._last_heard = wall0
-        while not stop.is_set():
-            if max_sim_s is not None and self.world.time_s - sim0 >= max_sim_s:
-                break
+    def run(
+        self,
+        stop: threading.Event,
+        max_sim_s: float | None = None,
+        between: Callable[[], None] | None = None,
+        pace: LockstepPace | None = None,
+    ) -> JsonBridgeStats:
+        """Lockstep until `stop`, `max_sim_s` of simulated time, or ArduPilot goes silent (raised);
+        `between()` between two frames, every `rig.BETWEEN_S` of wall time (a warm simulator's resets);
+        `pace`: the client holds the world too (`rig.LockstepPace`)."""
+        self._last_heard = time.monotonic()
+
+        def tick() -> None:
             self.serve_one(timeout_s=0.1)
-            if timing.speed is not None:
-                ahead_s = (self.world.time_s - sim0) / timing.speed - (time.monotonic() - wall0)
-                if ahead_s > 0.001:
-                    time.sleep(ahead_s)
-            with self._stats_lock:
-                self._stats.wall_s = time.monotonic() - wall0
+
+        run_lockstep(lambda: self.world, tick, stop, self.timing.speed, max_sim_s, between, self._wall, pace)
         return self.stats()
+
+    def _wall(self, seconds: float) -> None:
+        with self._stats_lock:
+            self._stats.wall_s = seconds
 
     def serve_one(self, timeout_s: float) -> bool:
         """Answer one servo packet if one arrives within `timeout_s`; True when one did."""
@@ -177,13 +205,14 @@ class ArduPilotBridge:
             )
         world, timing = self.world, self.timing
         world.step_rotors(self.mapping.rotor_speeds(packet.pwm_us), self._substeps)
-        truth = self._truth.read()
+        world_truth = self._truth.read()
+        truth = self.last_truth = self.frame.apply(world_truth)
         imu = self.imu.read(truth)
         frames = self._stats.frames
         if frames % timing.rangefinder_every == 0:
-            self._range_m = self._forward_range_m(truth.rotation_ned_frd)
+            self._range_m = self._forward_range_m(world_truth.rotation_ned_frd)
         reply = state_json(
-            world.time_s,
+            truth.time_s,
             imu.gyro_frd_rad_s.tolist(),
             imu.accel_frd_m_s2.tolist(),
             truth.position_ned_m.tolist(),

@@ -9,11 +9,12 @@ while the bridge still answers its frames (it only handles SIGTERM between frame
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,12 +31,14 @@ from sim_world.ardupilot_bridge.ardupilot_process import (
 )
 from sim_world.ardupilot_bridge.bridge import ArduPilotBridge, JsonBridgeStats, JsonTiming
 from sim_world.ardupilot_bridge.link import JsonPhysicsServer
+from sim_world.process_entry import LauncherRequests
 from sim_world.px4_bridge.geodesy import HomePoint
 from sim_world.rendering.video import VideoConfig, WorldVideoFeed
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfig
 from sim_world.sitl.imu import ImuModel, SensorNoise
-from sim_world.sitl.rig import CameraClock, build_sitl_world
-from sim_world.world import derived_seed
+from sim_world.sitl.resets import SitlResets
+from sim_world.sitl.rig import CameraClock, LockstepPace, build_sitl_world
+from sim_world.world import World, derived_seed
 
 log = logging.getLogger(__name__)
 
@@ -108,20 +111,34 @@ class ArduPilotSimReady:
     ardupilot_pid: int | None
     first_frame_after_wall_s: float
     frame_rate_hz: int
+    vehicle_time_s: float | None = None
+    """After a reset: ArduPilot's clock (s) when the new world began."""
+
+
+def build_ardupilot_world(config: ArduPilotSimConfig) -> World:
+    """The world with the drone landed below the start pose (or at the default start)."""
+    return build_sitl_world(
+        config.scene, config.seed, config.image_size_px, config.timing.frame_rate_hz, config.wind,
+        config.start_offset,
+    )  # fmt: skip
 
 
 def run_ardupilot_sim(
     config: ArduPilotSimConfig,
     stop: threading.Event | None = None,
     on_ready: Callable[[ArduPilotSimReady], None] | None = None,
+    requests: LauncherRequests | None = None,
+    on_reset: Callable[[ArduPilotSimReady | None, str | None], None] | None = None,
 ) -> JsonBridgeStats:
-    """Serve the world to ArduPilot until `stop`, `duration_s`, or ArduPilot's exit (raised)."""
+    """Serve the world to ArduPilot until `stop`, `duration_s`, or ArduPilot's exit (raised).
+
+    `requests`: the launcher's (`drone_inspect_core.launcher_requests`); a reset puts a new world behind
+    the running ArduPilot (`ArduPilotBridge.rebase`, the video feed's `reset`), then `on_reset(ready,
+    None)`, or `on_reset(None, why)` when it could not (the old world flies on)."""
     stop = stop or threading.Event()
-    world = build_sitl_world(
-        config.scene, config.seed, config.image_size_px, config.timing.frame_rate_hz, config.wind,
-        config.start_offset,
-    )  # fmt: skip
-    with world:
+    worlds = SitlResets(config, build_ardupilot_world)  # the world flown now, and the resets that replace it
+    world = worlds.world
+    with contextlib.closing(worlds):
         origin = world.state().position_enu_m.copy()
         rng = np.random.default_rng(derived_seed(config.seed, 7))
         imu = ImuModel(config.noise, rng, config.timing.frame_period_s)
@@ -138,8 +155,27 @@ def run_ardupilot_sim(
                 camera = None if video is None else CameraClock(video.capture, config.timing.camera_fps)
                 bridge = ArduPilotBridge(world, server, imu, config.timing, camera, origin)
                 with ArduPilotProcess(_options(config)) as ardupilot:
+                    facts: list[ArduPilotSimReady] = []  # the ready facts, which a reset answers with too
+
+                    def ready(info: ArduPilotSimReady) -> None:
+                        facts.append(info)
+                        if on_ready is not None:
+                            on_ready(info)
+
+                    def between() -> None:
+                        assert requests is not None
+                        error = worlds.take(requests, bridge, video)
+                        if error is not False and on_reset is not None:
+                            answer = replace(facts[0], vehicle_time_s=bridge.rebased_at_s)
+                            on_reset(answer if error is None else None, error or None)
+
+                    paced = requests is not None and config.timing.speed is None
                     try:
-                        return _serve(config, stop, on_ready, bridge, ardupilot, video)
+                        return _serve(
+                            config, stop, ready, bridge, ardupilot, video,
+                            None if requests is None else between,
+                            LockstepPace(requests) if paced and requests is not None else None,
+                        )  # fmt: skip
                     finally:
                         _stop_while_serving(bridge, ardupilot)
             finally:
@@ -169,6 +205,8 @@ def _serve(
     bridge: ArduPilotBridge,
     ardupilot: ArduPilotProcess,
     video: WorldVideoFeed | None,
+    between: Callable[[], None] | None = None,
+    pace: LockstepPace | None = None,
 ) -> JsonBridgeStats:
     started = time.monotonic()
     while not bridge.serve_one(timeout_s=0.1):  # ArduPilot's first frame: lockstep from here
@@ -180,25 +218,24 @@ def _serve(
                 f"ArduPilot sent no physics frame to UDP port {config.json_port} within "
                 f"{config.connect_timeout_s:.0f} s; its console ended with:\n{ardupilot.output_tail()}"
             )
+    ready = ArduPilotSimReady(
+        mavlink_url=config.mavlink_url,
+        system_id=config.system_id or 1,
+        video_url=None if video is None else video.stream_url,
+        truth_url=None if video is None else video.truth_url,
+        ardupilot_pid=ardupilot.pid,
+        first_frame_after_wall_s=round(time.monotonic() - started, 3),
+        frame_rate_hz=bridge.stats().ardupilot_rate_hz,
+    )
     if on_ready is not None:
-        on_ready(
-            ArduPilotSimReady(
-                mavlink_url=config.mavlink_url,
-                system_id=config.system_id or 1,
-                video_url=None if video is None else video.stream_url,
-                truth_url=None if video is None else video.truth_url,
-                ardupilot_pid=ardupilot.pid,
-                first_frame_after_wall_s=round(time.monotonic() - started, 3),
-                frame_rate_hz=bridge.stats().ardupilot_rate_hz,
-            )
-        )
+        on_ready(ready)
     if config.ardupilot_dies_at_s is not None:
         bridge.run(stop, max_sim_s=max(0.0, config.ardupilot_dies_at_s - bridge.world.time_s))
         if not stop.is_set():
             log.warning("killing ArduPilot at %.1f s of simulated time (injected fault)", bridge.world.time_s)
             ardupilot.kill()
     remaining = None if config.duration_s is None else max(0.0, config.duration_s - bridge.world.time_s)
-    return bridge.run(stop, max_sim_s=remaining)
+    return bridge.run(stop, max_sim_s=remaining, between=between, pace=pace)
 
 
 def _stop_while_serving(bridge: ArduPilotBridge, ardupilot: ArduPilotProcess) -> None:

@@ -13,16 +13,23 @@ from sim_world.ardupilot_bridge.ardupilot_process import ArduPilotStartError
 from sim_world.ardupilot_bridge.bridge import ArduPilotRestartedError
 from sim_world.ardupilot_bridge.link import ArduPilotSilentError, PhysicsLinkError
 from sim_world.ardupilot_bridge.run import ArduPilotSimConfig, run_ardupilot_sim
-from sim_world.process_entry import say_ready, stop_on_signals
+from sim_world.process_entry import LauncherRequests, say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
 from sim_world.rendering.video import VideoError
 
 log = logging.getLogger(__name__)
 
 READY_PREFIX = "ardupilot-sim ready: "
+RESET_PREFIX = "ardupilot-sim reset: "
+"""A warm simulator's answer to a reset: the ready facts, or `{"error": ...}`."""
 
 
-def serve(config: ArduPilotSimConfig, out: TextIO, watch_parent: bool = False) -> int:
+def serve(
+    config: ArduPilotSimConfig,
+    out: TextIO,
+    watch_parent: bool = False,
+    requests: LauncherRequests | None = None,
+) -> int:
     """Run until SIGINT, SIGTERM, SIGHUP (or the parent's death, with `watch_parent`); an exit code.
 
     Prints one line `ardupilot-sim ready: {json}` to `out` once ArduPilot's first physics frame is
@@ -33,7 +40,13 @@ def serve(config: ArduPilotSimConfig, out: TextIO, watch_parent: bool = False) -
     if watch_parent:
         parent_watch(stop, "ardupilot-sim")
     try:
-        stats = run_ardupilot_sim(config, stop, on_ready=lambda info: say_ready(out, READY_PREFIX, info))
+        stats = run_ardupilot_sim(
+            config,
+            stop,
+            on_ready=lambda info: say_ready(out, READY_PREFIX, info),
+            requests=requests,
+            on_reset=lambda info, error: say_ready(out, RESET_PREFIX, {"error": error} if error else info),
+        )
     except (ArduPilotStartError, ArduPilotSilentError, ArduPilotRestartedError, PhysicsLinkError, VideoError,
             OSError) as exc:  # fmt: skip
         log.error("ardupilot-sim: %s", exc)

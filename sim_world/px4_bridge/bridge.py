@@ -14,6 +14,10 @@ Each tick of `sensor_period_s` (4 ms) of simulated time:
 
 Before PX4's first answer (it is still booting) the loop waits a short while for
 each answer and then goes on with the motors off, so boot does not stall.
+
+Kept warm between missions, `rebase(world, origin)` puts the next mission's world (freshly built)
+behind the running PX4: PX4 senses it through an `AutopilotFrame` in which the new start is where and
+when PX4 last saw the drone, so its estimator, its clock and its IMU run on without a jump.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -31,7 +36,8 @@ from sim_world.px4_bridge.geodesy import HomePoint
 from sim_world.px4_bridge.link import Px4DisconnectedError, SimulatorServer
 from sim_world.px4_bridge.messages import ActuatorCommand, HilEncoder, RotorMapping
 from sim_world.px4_bridge.sensors import SensorSuite, Truth
-from sim_world.sitl.rig import CameraClock, TruthReader
+from sim_world.sitl.frame import AutopilotFrame
+from sim_world.sitl.rig import CameraClock, LockstepPace, TruthReader, continue_in, run_lockstep
 from sim_world.vehicle.telemetry import distance_sensor_message
 from sim_world.world import World
 
@@ -119,7 +125,11 @@ class Px4Bridge:
         self._command: ActuatorCommand | None = None
         self._last_heard = time.monotonic()
         self._truth_reader = TruthReader(world, self.origin_enu_m, self.timing.sensor_period_s)
+        self.frame = AutopilotFrame()
         self.last_truth: Truth | None = None
+        """What PX4 was last told (its frame)."""
+        self.rebased_at_s: float | None = None
+        """PX4's clock (its `time_boot`, s) when the last `rebase`'s world began."""
         self._stats = BridgeStats()
         self._stats_lock = threading.Lock()
         world.drone.stop_rotors()
@@ -137,31 +147,44 @@ class Px4Bridge:
         """PX4's clock: the time of the last HIL_SENSOR sent."""
         return self._time_usec
 
+    def rebase(self, world: World, origin_enu_m: np.ndarray) -> None:
+        """Fly `world` (a fresh build, the drone landed and still) from the next tick on, shown to PX4 as
+        the continuation of what it last saw (`AutopilotFrame.continuing`); the old world is the caller's."""
+        period_s = self.timing.sensor_period_s
+        next_time_s = (self._time_usec - PX4_CLOCK_OFFSET_US) / 1e6 + period_s
+        reader, self.frame = continue_in(
+            world, origin_enu_m, period_s, self.last_truth, next_time_s, self.camera
+        )
+        self.rebased_at_s = next_time_s + PX4_CLOCK_OFFSET_US / 1e6  # PX4's own clock (time_boot)
+        self.world, self.origin_enu_m, self._truth_reader = world, origin_enu_m, reader
+
     # --------------------------------------------------------------------- loop
-    def run(self, stop: threading.Event, max_sim_s: float | None = None) -> BridgeStats:
-        """Lockstep until `stop`, `max_sim_s` of simulated time, or PX4 disconnects (re-raised)."""
-        timing = self.timing
-        wall0 = time.monotonic()
-        sim0 = self.world.time_s
-        self._last_heard = wall0
-        while not stop.is_set():
-            if max_sim_s is not None and self.world.time_s - sim0 >= max_sim_s:
-                break
-            self.step()
-            if timing.speed is not None:
-                ahead_s = (self.world.time_s - sim0) / timing.speed - (time.monotonic() - wall0)
-                if ahead_s > 0.001:
-                    time.sleep(ahead_s)
-            with self._stats_lock:
-                self._stats.wall_s = time.monotonic() - wall0
+    def run(
+        self,
+        stop: threading.Event,
+        max_sim_s: float | None = None,
+        between: Callable[[], None] | None = None,
+        pace: LockstepPace | None = None,
+    ) -> BridgeStats:
+        """Lockstep until `stop`, `max_sim_s` of simulated time, or PX4 disconnects (re-raised);
+        `between()` between two ticks, every `rig.BETWEEN_S` of wall time (a warm simulator's resets);
+        `pace`: the client holds the world too (`rig.LockstepPace`)."""
+        self._last_heard = time.monotonic()
+        run_lockstep(
+            lambda: self.world, self.step, stop, self.timing.speed, max_sim_s, between, self._wall, pace
+        )
         return self.stats()
+
+    def _wall(self, seconds: float) -> None:
+        with self._stats_lock:
+            self._stats.wall_s = seconds
 
     def step(self) -> None:
         """One sensor period: sensors out, PX4's answer in, physics one tick."""
         timing, world = self.timing, self.world
         tick = self._stats.ticks
-        truth = self.last_truth = self._truth_reader.read()
-        self._time_usec = round(world.time_s * 1e6) + PX4_CLOCK_OFFSET_US
+        truth = self.last_truth = self.frame.apply(self._truth_reader.read())
+        self._time_usec = round(truth.time_s * 1e6) + PX4_CLOCK_OFFSET_US
         imu = self.sensors.imu(truth)
         mag = self.sensors.mag(truth) if tick % timing.mag_every == 0 else None
         baro = self.sensors.baro(truth) if tick % timing.baro_every == 0 else None
@@ -176,7 +199,7 @@ class Px4Bridge:
                 )
             )
         if tick % timing.range_every == 0:
-            message = distance_sensor_message(round(world.time_s * 1000), world.forward_range_m())
+            message = distance_sensor_message(round(truth.time_s * 1000), world.forward_range_m())
             out.append(self._encoder.pack(message))
         self.server.send(b"".join(out))
         self._await_answer(self._time_usec)

@@ -9,11 +9,12 @@ goes away. Everything is closed in reverse order on every way out.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TextIO
 
@@ -24,7 +25,7 @@ from drone_inspect_core.ports import (
     free_port,
 )
 from drone_inspect_core.world_options import CameraFaults, StartPose, WindConfig
-from sim_world.process_entry import say_ready, stop_on_signals
+from sim_world.process_entry import LauncherRequests, say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
 from sim_world.px4_bridge.bridge import BridgeStats, BridgeTiming, CameraClock, Px4Bridge
 from sim_world.px4_bridge.geodesy import HomePoint, magnetic_field_ned_gauss
@@ -44,7 +45,8 @@ from sim_world.px4_bridge.px4_process import (
 from sim_world.px4_bridge.sensors import SensorNoise, SensorSuite
 from sim_world.rendering.video import VideoConfig, VideoError, WorldVideoFeed
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfig
-from sim_world.sitl.rig import SITL_QUAD, build_sitl_world
+from sim_world.sitl.resets import SitlResets
+from sim_world.sitl.rig import SITL_QUAD, LockstepPace, build_sitl_world
 from sim_world.world import World, derived_seed
 
 log = logging.getLogger(__name__)
@@ -142,6 +144,8 @@ class Px4SimReady:
     """The bridge's TCP port PX4 dialled."""
     px4_mavlink_udp: int | None = None
     """PX4's one MAVLink port (bound on every interface), where the run chose it."""
+    vehicle_time_s: float | None = None
+    """After a reset: PX4's clock (its `time_boot`, s) when the new world began."""
 
 
 def build_px4_world(config: Px4SimConfig) -> World:
@@ -155,11 +159,18 @@ def run_px4_sim(
     config: Px4SimConfig,
     stop: threading.Event | None = None,
     on_ready: Callable[[Px4SimReady], None] | None = None,
+    requests: LauncherRequests | None = None,
+    on_reset: Callable[[Px4SimReady | None, str | None], None] | None = None,
 ) -> BridgeStats:
-    """Serve the world to PX4 until `stop`, `duration_s`, or PX4's exit (`Px4StartError` / disconnect)."""
+    """Serve the world to PX4 until `stop`, `duration_s`, or PX4's exit (`Px4StartError` / disconnect).
+
+    `requests`: the launcher's (`drone_inspect_core.launcher_requests`); a reset puts a new world behind
+    the running PX4 (`Px4Bridge.rebase`, the video feed's `reset`), then `on_reset(ready, None)`, or
+    `on_reset(None, why)` when it could not (the old world flies on)."""
     stop = stop or threading.Event()
-    world = build_px4_world(config)
-    with world:
+    worlds = SitlResets(config, build_px4_world)  # the world flown now, and the resets that replace it
+    world = worlds.world
+    with contextlib.closing(worlds):
         origin = world.state().position_enu_m.copy()
         field = magnetic_field_ned_gauss(
             config.home.latitude_deg,
@@ -210,19 +221,18 @@ def run_px4_sim(
                                 f"{px4.output_tail()}"
                             )
                         bridge.step()
+                    ready = Px4SimReady(
+                        mavlink_url=config.mavlink_url,
+                        system_id=config.system_id or config.instance + 1,
+                        video_url=None if video is None else video.stream_url,
+                        truth_url=None if video is None else video.truth_url,
+                        px4_pid=px4.pid,
+                        lockstep_after_s=world.time_s,
+                        simulator_tcp=server.address[1],
+                        px4_mavlink_udp=None if options.ports is None else options.ports.mavlink_udp,
+                    )
                     if on_ready is not None:
-                        on_ready(
-                            Px4SimReady(
-                                mavlink_url=config.mavlink_url,
-                                system_id=config.system_id or config.instance + 1,
-                                video_url=None if video is None else video.stream_url,
-                                truth_url=None if video is None else video.truth_url,
-                                px4_pid=px4.pid,
-                                lockstep_after_s=world.time_s,
-                                simulator_tcp=server.address[1],
-                                px4_mavlink_udp=None if options.ports is None else options.ports.mavlink_udp,
-                            )
-                        )
+                        on_ready(ready)
                     if config.px4_dies_at_s is not None:
                         bridge.run(stop, max_sim_s=max(0.0, config.px4_dies_at_s - world.time_s))
                         if not stop.is_set():
@@ -233,7 +243,26 @@ def run_px4_sim(
                     remaining = (
                         None if config.duration_s is None else max(0.0, config.duration_s - world.time_s)
                     )
-                    return bridge.run(stop, max_sim_s=remaining)
+
+                    def between() -> None:
+                        assert requests is not None
+                        error = worlds.take(requests, bridge, video)
+                        if error is not False and on_reset is not None:
+                            answer = replace(ready, vehicle_time_s=bridge.rebased_at_s)
+                            on_reset(answer if error is None else None, error or None)
+
+                    paced = requests is not None and config.timing.speed is None
+                    try:
+                        return bridge.run(
+                            stop,
+                            max_sim_s=remaining,
+                            between=None if requests is None else between,
+                            pace=LockstepPace(requests) if paced and requests is not None else None,
+                        )
+                    except Px4DisconnectedError as exc:  # what PX4 said last, beside why we gave up
+                        raise Px4DisconnectedError(
+                            f"{exc}; PX4's console ended with:\n{px4.output_tail()}"
+                        ) from exc
             finally:
                 if video is not None:
                     video.close()
@@ -267,7 +296,13 @@ def _accept(server: SimulatorServer, px4: Px4Process, timeout_s: float) -> None:
 READY_PREFIX = "px4-sim ready: "
 
 
-def serve(config: Px4SimConfig, out: TextIO, watch_parent: bool = False) -> int:
+RESET_PREFIX = "px4-sim reset: "
+"""A warm simulator's answer to a reset: the ready facts, or `{"error": ...}`."""
+
+
+def serve(
+    config: Px4SimConfig, out: TextIO, watch_parent: bool = False, requests: LauncherRequests | None = None
+) -> int:
     """Run until SIGINT, SIGTERM, SIGHUP (or the parent's death, with `watch_parent`); an exit code.
 
     Prints one line `px4-sim ready: {json}` to `out` once PX4 answers in lockstep (URLs,
@@ -278,7 +313,15 @@ def serve(config: Px4SimConfig, out: TextIO, watch_parent: bool = False) -> int:
     if watch_parent:
         parent_watch(stop, "px4-sim")
     try:
-        stats = run_px4_sim(config, stop, on_ready=lambda info: say_ready(out, READY_PREFIX, info))
+        stats = run_px4_sim(
+            config,
+            stop,
+            on_ready=lambda info: say_ready(out, READY_PREFIX, info),
+            requests=requests,
+            on_reset=lambda info, error: say_ready(
+                out, RESET_PREFIX, info if error is None else {"error": error}
+            ),
+        )
     except (Px4StartError, Px4DisconnectedError, SimulatorLinkError, VideoError, OSError) as exc:
         log.error("px4-sim: %s", exc)
         out.write(f"px4-sim failed: {exc}\n")

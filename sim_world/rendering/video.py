@@ -78,10 +78,12 @@ class VideoConfig:
     jpeg_quality: int = 85
     start_timeout_s: float = 60.0  # a fresh interpreter importing pybullet and building the scene
     clock: str = "wall"
-    """"wall": render the latest pose `fps` times per wall second (sim-vehicle, paced to the wall
-    clock); "sim": render each `capture()` once, the caller capturing `fps` times per simulated
-    second (the PX4 bridge, which may run faster or slower than real time)."""
-    max_behind_s: float = 1.0  # "sim" clock: how long capture() waits for the previous frame
+    """Where the poses come from: "wall", the vehicle loop's after each physics batch (sim-vehicle);
+    "sim", the caller's `capture()` `fps` times per simulated second (the bridges, in lockstep, faster
+    or slower than real time). Either way the latest pose is rendered `fps` times per wall second: a
+    stream's reader gets `fps` fresh frames a second on its own clock, as from a camera, however fast
+    the simulation runs or while it stands still (a lockstep waiting for its client), and the
+    simulation never waits for a render."""
     faults: CameraFaults | None = None
 
     def __post_init__(self) -> None:
@@ -105,17 +107,17 @@ class WorldVideoFeed:
         self._frames = ctx.Value("q", 0, lock=False)
         self._render_s = ctx.Value("d", 0.0, lock=False)
         self._stop = ctx.Value("b", 0, lock=False)
-        self._requested = ctx.Value("q", 0, lock=False)  # "sim" clock: captures so far
         self._conn, self._child_conn = ctx.Pipe(duplex=False)
+        self._child_commands, self._commands = ctx.Pipe(duplex=False)  # child reads: a new world to show
         self._write_pose()
         self._proc = ctx.Process(
             target=_serve,
             args=(world.config, world.seed, np.asarray(origin_enu_m, float), config, self._pose, self._stop),
             kwargs={
                 "conn": self._child_conn,
+                "commands": self._child_commands,
                 "frames": self._frames,
                 "render_s": self._render_s,
-                "requested": self._requested,
             },
             name="sim-vehicle-video",
             daemon=True,
@@ -138,7 +140,8 @@ class WorldVideoFeed:
     def start(self) -> None:
         """Spawn the render process and wait until it serves; VideoError naming the port otherwise."""
         self._proc.start()
-        self._child_conn.close()  # the child's end lives in the child now
+        self._child_conn.close()  # the child's ends live in the child now
+        self._child_commands.close()
         if not self._conn.poll(self.config.start_timeout_s):
             self.close()
             raise VideoError(f"video process did not start within {self.config.start_timeout_s:.0f} s")
@@ -149,22 +152,29 @@ class WorldVideoFeed:
         self.stream_url = detail
         log.info("video %s (render process %d)", self.stream_url, self._proc.pid)
 
-    def capture(self) -> None:
-        """Hand the drone's current pose to the render process (cheap: no rendering here).
+    def reset(self, world: World, origin_enu_m: np.ndarray, faults: CameraFaults | None) -> None:
+        """Show `world` (a fresh build, of any scene and seed) from now on, its truth from `origin_enu_m`
+        with `faults`: the render process rebuilds it, and its first frame is published before this
+        returns (so no frame of the old world comes after). `VideoError` if it cannot."""
+        if not self._proc.is_alive():
+            raise VideoError("the render process has ended: it cannot show a new world")
+        self._world = world
+        self._write_pose()
+        self._commands.send(("reset", world.config, world.seed, np.asarray(origin_enu_m, float), faults))
+        while True:
+            if not self._conn.poll(self.config.start_timeout_s):
+                raise VideoError(f"the render process did not show the new world within "
+                                 f"{self.config.start_timeout_s:.0f} s")  # fmt: skip
+            kind, detail = self._conn.recv()
+            if kind == "reset":
+                return
+            if kind == "reset-error":
+                raise VideoError(f"the render process cannot show the new world: {detail}")
 
-        With the "sim" clock each capture is one frame: first wait (bounded) until the frame
-        asked for last is out, so the stream keeps `fps` frames per simulated second.
-        """
-        if self.config.clock == "sim":
-            deadline = time.monotonic() + self.config.max_behind_s
-            while self._frames.value < self._requested.value and time.monotonic() < deadline:
-                if not self._proc.is_alive():
-                    break
-                time.sleep(0.0005)
-            if self._write_pose():
-                self._requested.value += 1
-        else:
-            self._write_pose()
+    def capture(self) -> None:
+        """Hand the drone's current pose to the render process (cheap: no rendering, no waiting here);
+        its next frame shows it (see `VideoConfig.clock`)."""
+        self._write_pose()
 
     def _write_pose(self) -> bool:
         s = self._world.state()
@@ -192,6 +202,46 @@ class WorldVideoFeed:
                 self._proc.terminate()
                 self._proc.join(timeout_s)
         self._conn.close()
+        self._commands.close()
+
+
+class _Scene:
+    """What the render process shows: the world, its truth's origin and the injected camera faults."""
+
+    def __init__(self, world: World, origin_enu_m: np.ndarray, faults: CameraFaults | None) -> None:
+        self.world, self.origin_enu_m = world, origin_enu_m
+        self.faults = faults or CameraFaults()
+        self.rng = random.Random(self.faults.seed)
+        self.extremes = TruthExtremes()
+        self.frozen: np.ndarray | None = None
+
+    def draw(self, values: list[float], server: MjpegServer) -> bool:
+        """Render the drone at `values` (the shared pose) and publish it with its truth (faults applied);
+        False once the injected fault says the stream dies."""
+        world = self.world
+        p.resetBasePositionAndOrientation(
+            world.drone.body_id, values[0:3], values[3:7], physicsClientId=world.client_id
+        )
+        render = world.render(with_seg=True)
+        truth = frame_truth(world, render, values, self.origin_enu_m)
+        self.extremes.update(truth["drone"]["position_ned_m"], truth["drone"]["velocity_ned_m_s"])
+        truth["extremes"] = self.extremes.as_dict()
+        sim_s, faults = values[10], self.faults
+        if faults.dies_at_s is not None and sim_s >= faults.dies_at_s:
+            log.warning("video: the stream dies at %.1f s (injected fault)", sim_s)
+            return False
+        image = render.rgb
+        if faults.freeze_at_s is not None and 0 <= sim_s - faults.freeze_at_s < faults.freeze_for_s:
+            self.frozen = image if self.frozen is None else self.frozen
+            image = self.frozen
+        if not (faults.drop and self.rng.random() < faults.drop):
+            server.publish(image, truth)
+        return True
+
+
+def _read_pose(pose: Any) -> list[float]:
+    with pose.get_lock():
+        return list(pose)
 
 
 def _serve(
@@ -202,18 +252,19 @@ def _serve(
     pose: Any,
     stop: Any,
     conn: Connection,
+    commands: Connection,
     frames: Any,
     render_s: Any,
-    requested: Any,
 ) -> None:
-    """The render process: same scene, drone posed from `pose`, frames at `config.fps` (see `clock`)."""
+    """The render process: same scene, drone posed from `pose`, frames at `config.fps` (see `clock`);
+    a new world when the vehicle sends one (`WorldVideoFeed.reset`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent stops us
     try:
-        world = World(world_config, seed)
+        scene = _Scene(World(world_config, seed), origin_enu_m, config.faults)
     except Exception as exc:
         conn.send(("error", f"cannot build the world: {exc}"))
         return
-    with world:
+    try:
         try:
             server = MjpegServer(config.host, config.port, jpeg_quality=config.jpeg_quality)
         except OSError as exc:
@@ -226,45 +277,36 @@ def _serve(
             parent = os.getppid()
             # A vehicle killed outright never sets `stop` (and `daemon=True` only acts on a normal
             # exit): re-parenting means it is gone, so stop rather than render for nobody forever.
-            sim_clock = config.clock == "sim"
-            faults = config.faults or CameraFaults()
-            rng = random.Random(faults.seed)
-            extremes = TruthExtremes()
-            frozen: np.ndarray | None = None
             while not stop.value and os.getppid() == parent:
-                if sim_clock:
-                    if requested.value <= frames.value:  # nothing new to draw
-                        time.sleep(0.0005)
-                        continue
-                    frames_wanted = requested.value
+                if commands.poll():
+                    scene = _reset(scene, commands.recv(), pose, server, conn)
+                    next_t = time.monotonic()
                 t0 = time.monotonic()
-                with pose.get_lock():
-                    values = list(pose)
-                p.resetBasePositionAndOrientation(
-                    world.drone.body_id, values[0:3], values[3:7], physicsClientId=world.client_id
-                )
-                render = world.render(with_seg=True)
-                truth = frame_truth(world, render, values, origin_enu_m)
-                extremes.update(truth["drone"]["position_ned_m"], truth["drone"]["velocity_ned_m_s"])
-                truth["extremes"] = extremes.as_dict()
-                sim_s = values[10]
-                if faults.dies_at_s is not None and sim_s >= faults.dies_at_s:
-                    log.warning("video: the stream dies at %.1f s (injected fault)", sim_s)
+                if not scene.draw(_read_pose(pose), server):
                     break
-                image = render.rgb
-                if faults.freeze_at_s is not None and 0 <= sim_s - faults.freeze_at_s < faults.freeze_for_s:
-                    frozen = image if frozen is None else frozen
-                    image = frozen
-                if not (faults.drop and rng.random() < faults.drop):
-                    server.publish(image, truth)
                 render_s.value += time.monotonic() - t0
-                if sim_clock:
-                    frames.value = frames_wanted  # (a capture that raced this frame is drawn next)
-                    continue
                 frames.value += 1
-                next_t = max(next_t + period, time.monotonic())
-                while not stop.value and (left := next_t - time.monotonic()) > 0:
+                next_t = max(next_t + period, time.monotonic())  # at most `fps` frames a wall second
+                while not stop.value and not commands.poll() and (left := next_t - time.monotonic()) > 0:
                     time.sleep(min(STOP_POLL_S, left))
+    finally:
+        scene.world.close()
+
+
+def _reset(
+    scene: _Scene, command: tuple[Any, ...], pose: Any, server: MjpegServer, conn: Connection
+) -> _Scene:
+    """Build the world a reset asks for and publish its first frame; the old scene stays on error."""
+    _, world_config, seed, origin_enu_m, faults = command
+    try:
+        fresh = _Scene(World(world_config, seed), origin_enu_m, faults)
+    except Exception as exc:
+        conn.send(("reset-error", f"cannot build the world: {exc}"))
+        return scene
+    scene.world.close()
+    fresh.draw(_read_pose(pose), server)
+    conn.send(("reset", server.stream_url))
+    return fresh
 
 
 def frame_truth(world: World, render: Any, pose: list[float], origin_enu_m: np.ndarray) -> dict[str, Any]:

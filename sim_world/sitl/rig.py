@@ -10,6 +10,8 @@ velocity from the start point, body FRD rates, the body-to-NED rotation.
 from __future__ import annotations
 
 import math
+import threading
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -18,8 +20,10 @@ import pybullet as p
 from drone_inspect_core.frames import enu_to_ned
 from drone_inspect_core.world_options import StartPose, WindConfig
 from sim_world.physics.quadrotor import QuadrotorParams
+from sim_world.process_entry import LauncherRequests
 from sim_world.rendering.camera import CameraConfig
 from sim_world.scene.config import SceneConfig
+from sim_world.sitl.frame import AutopilotFrame
 from sim_world.sitl.imu import Truth
 from sim_world.world import World, WorldConfig
 
@@ -113,8 +117,111 @@ class CameraClock:
         self._next_s = 0.0
         self.frames = 0
 
+    def restart(self) -> None:
+        """A new world's clock (from 0): the next tick captures."""
+        self._next_s = 0.0
+
     def tick(self, sim_s: float) -> None:
         if sim_s + 1e-9 >= self._next_s:
             self._capture()
             self.frames += 1
             self._next_s = max(self._next_s + self._period, sim_s)
+
+
+BETWEEN_S = 0.02
+"""How often (wall) a bridge's lockstep loop lets its caller in between two ticks."""
+
+
+class LockstepPace:
+    """A lockstep that waits for its client too, as the sim-vehicle's does at speed "max".
+
+    An autopilot in lockstep waits for its bridge, so at speed "max" the simulation runs as fast as the
+    two can go, whatever the client does: while a controller reads a frame, detects and plans (tens of
+    milliseconds of wall time), the vehicle flew on for as many tenths of a simulated second, and a move
+    the controller ended on the vehicle's clock ran on by as much. Paced, the world may run `lead_s` of
+    simulated time past the moment the client last said it waits on the vehicle's clock (a pace request,
+    `drone_inspect_core.launcher_requests`, sent by its vehicle backend's waits), so the vehicle runs
+    only while the client waits, flat out. Until the first pace, and once the client has been silent
+    `silence_s` of wall time (a client that stopped must still meet the autopilot's failsafes), it runs
+    free."""
+
+    def __init__(self, requests: LauncherRequests, lead_s: float = 0.1, silence_s: float = 0.25) -> None:
+        self.requests, self.lead_s, self.silence_s = requests, lead_s, silence_s
+        self._seen = 0
+        self._until_s = 0.0
+
+    def holds(self, world_time_s: float) -> bool:
+        """Whether the world, at `world_time_s`, must wait for the client before its next tick."""
+        requests = self.requests
+        paces = requests.paces
+        if paces == 0:
+            return False
+        if paces != self._seen:
+            self._seen, self._until_s = paces, world_time_s + self.lead_s
+        if time.monotonic() - requests.paced_at > self.silence_s:
+            return False
+        return world_time_s >= self._until_s
+
+    def wait(self, timeout_s: float = 0.005) -> None:
+        """Until the client paces again (or `timeout_s`)."""
+        self.requests.paced.wait(timeout_s)
+        self.requests.paced.clear()
+
+
+def run_lockstep(
+    world_now: Callable[[], World],
+    tick: Callable[[], None],
+    stop: threading.Event,
+    speed: float | None,
+    max_sim_s: float | None = None,
+    between: Callable[[], None] | None = None,
+    on_wall_s: Callable[[float], None] | None = None,
+    pace: LockstepPace | None = None,
+) -> None:
+    """A bridge's loop around its one-tick `tick()`: until `stop`, or `max_sim_s` of the world's time;
+    `between()` every `BETWEEN_S` of wall time (a warm simulator's resets: a new world, `world_now()`,
+    counts from its own start); with `pace`, a tick waits while the client holds the world; with a
+    finite `speed`, sleep until the wall clock catches up (× speed); `on_wall_s(seconds)` after every
+    tick, the wall time since the loop (or the world) began."""
+    wall0 = next_between = time.monotonic()
+    sim0 = world_now().time_s
+    while not stop.is_set():
+        if max_sim_s is not None and world_now().time_s - sim0 >= max_sim_s:
+            break
+        if between is not None and time.monotonic() >= next_between:
+            world = world_now()
+            between()
+            next_between = time.monotonic() + BETWEEN_S
+            if world_now() is not world:
+                sim0, wall0 = world_now().time_s, time.monotonic()
+        if pace is not None and pace.holds(world_now().time_s):
+            pace.wait()
+            continue
+        tick()
+        if speed is not None:
+            ahead_s = (world_now().time_s - sim0) / speed - (time.monotonic() - wall0)
+            if ahead_s > 0.001:
+                time.sleep(ahead_s)
+        if on_wall_s is not None:
+            on_wall_s(time.monotonic() - wall0)
+
+
+def continue_in(
+    world: World,
+    origin_enu_m: np.ndarray,
+    period_s: float,
+    last_seen: Truth | None,
+    next_time_s: float,
+    camera: CameraClock | None,
+) -> tuple[TruthReader, AutopilotFrame]:
+    """A bridge's truth reader for `world` (a fresh build, the drone landed, rotors stopped) and the
+    frame that shows it to the autopilot as the continuation of `last_seen` at `next_time_s`
+    (`AutopilotFrame.continuing`); the camera's clock starts again with the world's."""
+    if last_seen is None:
+        raise RuntimeError("a bridge can rebase only after its autopilot was told something")
+    reader = TruthReader(world, origin_enu_m, period_s)
+    frame = AutopilotFrame.continuing(last_seen, reader.read(), next_time_s)
+    world.drone.stop_rotors()
+    if camera is not None:
+        camera.restart()
+    return reader, frame

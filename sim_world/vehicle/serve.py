@@ -19,9 +19,10 @@ from dataclasses import dataclass, field, replace
 from typing import Any, TextIO
 
 from drone_inspect_core.config_files import from_json
+from drone_inspect_core.launcher_requests import reset_config
 from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.world_options import CameraFaults, StartPose, WindConfig
-from sim_world.process_entry import say_ready, stop_on_signals
+from sim_world.process_entry import LauncherRequests, say_ready, stop_on_signals
 from sim_world.process_entry import watch_parent as parent_watch
 from sim_world.rendering.camera import CameraConfig
 from sim_world.rendering.video import VideoConfig, VideoError, WorldVideoFeed
@@ -71,6 +72,9 @@ class SimVehicleReady:
     local_address: list[Any]
     video_url: str | None
     truth_url: str | None
+    vehicle_time_s: float | None = None
+    """After a reset: the vehicle's clock (its `time_boot_ms`, in s) when the new world began; telemetry
+    stamped later is the new world's."""
 
 
 def build_world(run: SimVehicleRun) -> tuple[World, SimVehicleConfig]:
@@ -95,14 +99,19 @@ def run_sim_vehicle(
     stop: threading.Event | None = None,
     on_ready: Callable[[SimVehicle], None] | None = None,
     on_end: Callable[[SimVehicle], None] | None = None,
+    requests: LauncherRequests | None = None,
+    on_reset: Callable[[SimVehicle, str | None], None] | None = None,
 ) -> LoopStats:
     """Serve the world until `stop` is set or `duration_s` passes; returns the loop statistics.
 
     `on_ready(vehicle)` is called once the ports are open, `on_end(vehicle)` before it closes.
+    `requests`: the launcher's (`drone_inspect_core.launcher_requests`); a reset puts a new world behind
+    the running vehicle (`SimVehicle.reset`, the video feed's `reset`), then `on_reset(vehicle, None)`,
+    or `on_reset(vehicle, why)` when it could not (the old world flies on).
     """
     stop = stop or threading.Event()
     world, vehicle_config = build_world(run)
-    with world:
+    try:
         model = WorldVehicleModel(world)
         video = None
         if vehicle_config.video:
@@ -121,8 +130,8 @@ def run_sim_vehicle(
                 on_ready(vehicle)
             waited = 0.0
             period = run.status_every_s if run.status_every_s > 0 else 0.5
-            if run.dies_at_s is not None:
-                period = min(period, 0.05)
+            if run.dies_at_s is not None or requests is not None:
+                period = min(period, 0.02 if requests is not None else 0.05)
             while not stop.is_set() and vehicle.running:
                 if run.duration_s is not None and waited >= run.duration_s:
                     break
@@ -134,6 +143,9 @@ def run_sim_vehicle(
                 step = period if run.duration_s is None else min(period, run.duration_s - waited)
                 stop.wait(step)
                 waited += step
+                request = requests.take() if requests is not None else None
+                if request is not None:
+                    run, world = _reset(vehicle, video, run, world, request, on_reset)
                 if run.status_every_s > 0:
                     s = vehicle.stats()
                     log.info(
@@ -144,11 +156,59 @@ def run_sim_vehicle(
             stats = vehicle.stats()
             if on_end is not None:
                 on_end(vehicle)
+    finally:
+        world.close()
     return stats
+
+
+def _reset(
+    vehicle: SimVehicle,
+    video: WorldVideoFeed | None,
+    run: SimVehicleRun,
+    world: World,
+    request: dict[str, Any],
+    on_reset: Callable[[SimVehicle, str | None], None] | None,
+) -> tuple[SimVehicleRun, World]:
+    """The new world a reset request asks for, behind the running vehicle; the old run and world when it
+    cannot be (said through `on_reset`)."""
+    try:
+        config = reset_config(request)
+        if config is None:
+            raise ValueError(f"not a request this vehicle knows: {sorted(request)}")
+        new_run = run_from_json(config)
+        new_run = replace(new_run, vehicle=replace(new_run.vehicle, signing_key=run.vehicle.signing_key))
+        if replace(new_run.vehicle, params=run.vehicle.params) != run.vehicle:
+            raise ValueError("a reset may change the world, not the vehicle (ports, id, speed, limits)")
+        if new_run.image_size_px != run.image_size_px:
+            raise ValueError("a reset may not change the camera's image size")
+        new_world, vehicle_config = build_world(new_run)
+    except (ValueError, KeyError, TypeError) as exc:
+        if on_reset is not None:
+            on_reset(vehicle, f"bad reset request: {exc}")
+        return run, world
+    model = WorldVehicleModel(new_world)
+
+    def show_it() -> None:
+        if video is not None:
+            video.reset(new_world, model.origin_enu_m, new_run.video_faults)
+
+    try:
+        vehicle.reset(model, vehicle_config, show_it)
+    except (SimVehicleError, VideoError) as exc:
+        new_world.close()
+        if on_reset is not None:
+            on_reset(vehicle, str(exc))
+        raise  # a vehicle half reset cannot fly on: the process ends, and its launcher sees why
+    world.close()
+    if on_reset is not None:
+        on_reset(vehicle, None)
+    return new_run, new_world
 
 
 # --------------------------------------------------------------------------- serving a process
 READY_PREFIX = "sim-vehicle ready: "
+RESET_PREFIX = "sim-vehicle reset: "
+"""A warm vehicle's answer to a reset: the ready facts for the new world, or `{"error": ...}`."""
 SUMMARY_PREFIX = "sim-vehicle link: "
 """The last line of a served vehicle: who its link accepted messages from and what it dropped."""
 
@@ -168,7 +228,11 @@ def link_summary(vehicle: SimVehicle) -> dict[str, Any]:
 
 
 def serve(
-    run: SimVehicleRun, out: TextIO, watch_parent: bool = False, extra_stop: threading.Event | None = None
+    run: SimVehicleRun,
+    out: TextIO,
+    watch_parent: bool = False,
+    extra_stop: threading.Event | None = None,
+    requests: LauncherRequests | None = None,
 ) -> int:
     """Serve until SIGINT, SIGTERM, SIGHUP (or the parent's death, with `watch_parent`); an exit code.
 
@@ -180,22 +244,27 @@ def serve(
     if watch_parent:
         parent_watch(stop, "sim-vehicle")
 
-    def ready(vehicle: SimVehicle) -> None:
+    def info(vehicle: SimVehicle) -> SimVehicleReady:
         cfg = vehicle.config
-        info = SimVehicleReady(
+        return SimVehicleReady(
             mavlink_url=cfg.connection_url(),
             system_id=cfg.system_id,
             local_address=list(vehicle.local_address),
             video_url=vehicle.video_url,
             truth_url=vehicle.truth_url,
         )
-        say_ready(out, READY_PREFIX, info)
+
+    def reset(vehicle: SimVehicle, error: str | None) -> None:
+        answer = replace(info(vehicle), vehicle_time_s=vehicle.reset_clock_s) if error is None else None
+        say_ready(out, RESET_PREFIX, answer if answer is not None else {"error": error})
 
     def end(vehicle: SimVehicle) -> None:
         say_ready(out, SUMMARY_PREFIX, link_summary(vehicle))
 
     try:
-        stats = run_sim_vehicle(run, stop, on_ready=ready, on_end=end)
+        stats = run_sim_vehicle(
+            run, stop, lambda v: say_ready(out, READY_PREFIX, info(v)), end, requests, reset
+        )
     except (OSError, SimVehicleError, VideoError) as exc:
         print(f"sim-vehicle failed: {exc}", file=sys.stderr, flush=True)  # a launcher reads both
         return 1

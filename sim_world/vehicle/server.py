@@ -10,6 +10,12 @@ pose to the camera feed (which renders and serves MJPEG in its own process: see 
 
 Use in-process (tests) as `with SimVehicle(model, config) as v: ...`, or through
 `dronectl sim-vehicle` (`sim_world.vehicle.serve`).
+
+Kept warm between missions, `reset(model, config)` puts a new airframe (a freshly built world) behind
+the same link and video server: the loop stops, the commander, parameters and battery start afresh
+(an autopilot that has booted: no arming delay), the vehicle's clock (`time_boot_ms`) runs on, and
+the loop starts again. Only the world may change; the link's identity (ports, system id, key,
+speed, limits) may not.
 """
 
 from __future__ import annotations
@@ -19,7 +25,8 @@ import math
 import select
 import threading
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from types import TracebackType
 from typing import Protocol
 
@@ -27,7 +34,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sim_world.vehicle import px4_modes as modes
 from sim_world.vehicle.battery import BatteryModel
-from sim_world.vehicle.commander import Commander
+from sim_world.vehicle.commander import Commander, CommanderConfig
 from sim_world.vehicle.commands import MessageHandler
 from sim_world.vehicle.config import MAX_SPEED, SimVehicleConfig
 from sim_world.vehicle.link import UdpMavlinkLink
@@ -107,15 +114,12 @@ class SimVehicle:
         self.config = config or SimVehicleConfig()
         self._model = model
         self._video = video
-        self.params = ParameterStore(limited_specs(self.config.limits), overrides=self.config.params)
-        # Faster than real time, the client (MAVSDK: setpoints re-sent at 20 Hz of wall time) is timed
-        # on the wall clock: the commander's timers that wait on it use that clock too.
-        client_clock = time.monotonic if self.config.faster_than_real_time else None
-        cfg = self.config
-        self.commander = Commander(model, self.params, cfg.commander, client_clock, cfg.limits)
-        self._battery = BatteryModel(self.config.battery)
+        self._fresh_state(model, self.config.commander)
         self._builder = TelemetryBuilder(self.config.home, uid=0x5157_0000 + self.config.instance)
         self._boot_s = model.time_s
+        self._scheduler: MessageScheduler | None = None  # the link's stream rates, kept over resets
+        self.reset_clock_s: float | None = None
+        """The vehicle's clock (`time_boot_ms`, s) when the last reset's world began (None: never reset)."""
         self._link: UdpMavlinkLink | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -124,6 +128,16 @@ class SimVehicle:
         self._stats_lock = threading.Lock()
         self._snapshot: VehicleSnapshot = self._take_snapshot()
         self._telemetry_failed: set[int] = set()
+
+    def _fresh_state(self, model: VehicleModel, commander: CommanderConfig) -> None:
+        """Parameters, commander and battery as a vehicle starts with them."""
+        cfg = self.config
+        self.params = ParameterStore(limited_specs(cfg.limits), overrides=cfg.params)
+        # Faster than real time, the client (MAVSDK: setpoints re-sent at 20 Hz of wall time) is timed
+        # on the wall clock: the commander's timers that wait on it use that clock too.
+        client_clock = time.monotonic if cfg.faster_than_real_time else None
+        self.commander = Commander(model, self.params, commander, client_clock, cfg.limits)
+        self._battery = BatteryModel(cfg.battery)
 
     # ------------------------------------------------------------ lifecycle
     def start(self) -> SimVehicle:
@@ -143,8 +157,8 @@ class SimVehicle:
             adopt_client=cfg.adopt_client,
             signing_key=cfg.signing_key,
         )
-        self._thread = threading.Thread(target=self._run, name=f"sim-vehicle-{cfg.instance}", daemon=True)
-        self._thread.start()
+        self._scheduler = MessageScheduler(telemetry_rates_hz(cfg), time.monotonic())
+        self._start_loop()
         try:
             if self._video is not None:
                 self._video.start()
@@ -157,6 +171,38 @@ class SimVehicle:
             f", video {self._video.stream_url}" if self._video else "",
         )  # fmt: skip
         return self
+
+    def _start_loop(self) -> None:
+        self._stop = threading.Event()
+        name = f"sim-vehicle-{self.config.instance}"
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def reset(
+        self, model: VehicleModel, config: SimVehicleConfig, while_stopped: Callable[[], None] | None = None
+    ) -> None:
+        """A new airframe behind the same link (see the module docstring); `while_stopped` runs while the
+        loop stands still (the video feed's own reset). `SimVehicleError` if `config` changes more than
+        the world's parameters, or the loop had failed."""
+        if self._thread is None or self._link is None:
+            raise SimVehicleError("SimVehicle.reset() before start()")
+        if replace(config, params=self.config.params) != self.config:
+            raise SimVehicleError("a reset may change the world and its parameters, not the vehicle's link")
+        self._stop.set()
+        self._thread.join(5.0)
+        if self._thread.is_alive() or self._error is not None:
+            raise SimVehicleError(f"the vehicle loop did not stop for a reset: {self._error!r}")
+        elapsed_s = self._model.time_s - self._boot_s
+        self.reset_clock_s = elapsed_s
+        self.config, self._model = config, model
+        self._fresh_state(model, replace(config.commander, arming_boot_delay_s=0.0))  # booted long ago
+        self._boot_s = model.time_s - elapsed_s  # time_boot_ms runs on: the client's clock of the vehicle
+        self._telemetry_failed = set()
+        self._snapshot = self._take_snapshot()
+        if while_stopped is not None:
+            while_stopped()
+        self._start_loop()
+        log.info("sim vehicle reset: a new world from %.3f s of the vehicle's clock", elapsed_s)
 
     def close(self, timeout_s: float = 5.0) -> None:
         """Stop the loop and free the ports (idempotent); re-raises a loop failure as SimVehicleError."""
@@ -237,10 +283,9 @@ class SimVehicle:
             self._error = exc
 
     def _loop(self) -> None:
-        cfg, model, link = self.config, self._model, self._link
-        assert link is not None
+        cfg, model, link, scheduler = self.config, self._model, self._link, self._scheduler
+        assert link is not None and scheduler is not None
         dt = 1.0 / model.physics_hz
-        scheduler = MessageScheduler(telemetry_rates_hz(cfg), time.monotonic())
         handler = MessageHandler(
             self.commander, self.params, scheduler, self._builder, self._take_snapshot,
             cfg.system_id, cfg.home.altitude_amsl_m,

@@ -38,6 +38,10 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
         "dronectl.bench_concurrent",
         "several `fly` at once with defaults: own vehicle, own folder",
     ),
+    "missions": (
+        "dronectl.bench_missions",
+        "the same missions each way (in-process, sim-mavlink, PX4, ArduPilot): phases and ratios",
+    ),
 }
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import controller.benchmarks.sim as bench
@@ -50,6 +51,22 @@ def format_report(result: dict[str, Any]) -> str:
             f"  {size:>4} px            {row['p50_ms_no_seg']:9.2f}  {row['p99_ms_no_seg']:10.2f}"
             f"  {row['p50_ms_seg']:8.2f}  {row['p99_ms_seg']:8.2f}  {row['cpu_p50_ms_no_seg']:14.2f}"
         )
+    picked = mode["full_flight"]
+    which = "picked" if picked["picked_the_faster"] else "NOT picked"
+    lines.append(
+        f"auto picked {picked['mode']}: {picked['real_time_factor']:.2f}x real time in the full flight; "
+        f"the faster there: {picked['faster_mode']} ({which})"
+    )
+    peer = result.get("peer")
+    if peer is not None and "real_time_factor" in peer:
+        ratio = peer["ours_over_peer"]
+        lines.append(
+            f"peer (PyFlyt QuadX, 224 px camera @ 30 fps, hovering): {peer['real_time_factor']:.2f}x real "
+            f"time (CPU {peer['cpu_real_time_factor']:.2f}x; load {peer['load_avg_1min']:.2f}); this world "
+            f"in the picked mode: {ratio:.2f}x the peer's ({verdict(ratio, 'over_peer')})"
+        )
+    elif peer is not None:
+        lines.append(f"peer: not measured: {peer['error']}")
     lines.append(
         f"collection at 224 px: {coll['images_per_s']:.1f} images/s ({coll['images']:.0f} images, "
         f"{coll['workers']:.0f} workers; {verdict(coll['images_per_s'], 'collect_images_per_s')}); "
@@ -85,6 +102,12 @@ def main(argv: list[str]) -> int:
         default=0,
         help="busy-looping processes to run meanwhile (a measurement under load)",
     )
+    parser.add_argument(
+        "--peer-python",
+        type=Path,
+        help="an interpreter with PyFlyt (the optional extra [peer]; it pins numpy < 2, so usually a venv "
+        "of its own): also measure PyFlyt's QuadX with its 224 px camera at 30 fps, and the ratio",
+    )
     args = parser.parse_args(argv)
     settings = replace(
         SimBenchSettings(),
@@ -92,6 +115,7 @@ def main(argv: list[str]) -> int:
         collect_images=args.collect_images,
         collect_workers=args.workers,
         render_mode=args.render_mode,
+        peer_python=args.peer_python,
     )
     with cpu_hogs(args.cpu_hogs):
         result = run_sim_bench(settings)

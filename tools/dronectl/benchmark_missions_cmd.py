@@ -118,8 +118,9 @@ def _speed(option: str, text: str) -> float | str:
         raise ValueError(f"{option}: {exc}") from None
 
 
-def main(argv: list[str]) -> int:
-    parser = CommandParser(prog="dronectl benchmark-missions", description=__doc__.splitlines()[0])
+def build_parser(prog: str = "dronectl benchmark-missions", description: str | None = None) -> CommandParser:
+    """The options of `benchmark-missions` (also what `dronectl bench missions` flies each way)."""
+    parser = CommandParser(prog=prog, description=description or __doc__.splitlines()[0])
     parser.add_argument(
         "--n", type=at_least(1), default=200, help="missions per planner (default: %(default)s)"
     )
@@ -237,6 +238,12 @@ def main(argv: list[str]) -> int:
         help="worker processes, or the local Ray's CPUs (default: 1)",
     )
     add_ray_option(parser)
+    parser.add_argument(
+        "--fresh",
+        action="store_true",
+        help="sim-mavlink: a fresh simulator for every mission (default: each worker keeps one warm and "
+        "resets it to the next mission's world)",
+    )
     parser.add_argument("--json", type=new_file, help="write the summary and every mission's row here")
     parser.add_argument(
         "--report", type=Path, help="keep each mission's report.json under this folder (new or empty)"
@@ -246,6 +253,31 @@ def main(argv: list[str]) -> int:
         action="store_true",
         help="with --report: record each mission for the Rerun viewer as <report>/<mission>/mission.rrd",
     )
+    return parser
+
+
+def benchmark_config(args: argparse.Namespace, parser: CommandParser) -> BenchmarkConfig | None:
+    """The benchmark the options ask for; None (said on stderr) when a SITL folder is missing, a bad
+    option is a usage error (exit 2)."""
+    try:
+        return BenchmarkConfig(
+            base=base_mission(args),
+            n=args.n, seed=args.seed, planners=tuple(p.strip() for p in args.planner.split(",") if p.strip()),
+            parallel=args.parallel, rerun=args.rerun, ray=args.ray, instructions=args.instructions,
+            absent=args.absent, instructions_per_flight=args.instructions_per_flight,
+            scene_seed=args.scene_seed, warm=not args.fresh,
+            **{field: getattr(args, field) for field in ("view_fraction", "distance_m", "yaw_deg")
+               if getattr(args, field) is not None},
+        )  # fmt: skip
+    except (Px4FolderError, ArduPilotFolderError) as exc:
+        print(f"{parser.prog}: {exc}", file=sys.stderr)
+        return None
+    except ValueError as exc:
+        parser.error(str(exc))
+
+
+def main(argv: list[str]) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
     if args.rerun:
         if args.report is None:
@@ -259,21 +291,9 @@ def main(argv: list[str]) -> int:
             )
             return 2
     logging.getLogger().setLevel(logging.WARNING)
-    try:
-        config = BenchmarkConfig(
-            base=base_mission(args),
-            n=args.n, seed=args.seed, planners=tuple(p.strip() for p in args.planner.split(",") if p.strip()),
-            parallel=args.parallel, rerun=args.rerun, ray=args.ray, instructions=args.instructions,
-            absent=args.absent, instructions_per_flight=args.instructions_per_flight,
-            scene_seed=args.scene_seed,
-            **{field: getattr(args, field) for field in ("view_fraction", "distance_m", "yaw_deg")
-               if getattr(args, field) is not None},
-        )  # fmt: skip
-    except (Px4FolderError, ArduPilotFolderError) as exc:
-        print(f"dronectl benchmark-missions: {exc}", file=sys.stderr)
+    config = benchmark_config(args, parser)
+    if config is None:
         return 2
-    except ValueError as exc:
-        parser.error(str(exc))
     try:
         summary = run_benchmark(config, report_dir=args.report)
     except OutputDirError as exc:

@@ -9,10 +9,10 @@ and the report see only this, never the backend. A flown collection
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from controller.missions.schema import Mission
 from controller.missions.truth import TargetsTruth, TruthFollower
@@ -22,6 +22,9 @@ from controller.planning.planners import Planner, make_planner
 from flight.vehicle import Vehicle
 from perception.camera import Camera
 from perception.detector import Detector
+
+if TYPE_CHECKING:  # kits.warm imports MAVSDK: a kit that keeps nothing warm never loads it
+    from controller.missions.kits.warm import WarmSimulators
 
 TLOG_NAME = "flight.tlog"
 
@@ -111,7 +114,8 @@ def named_target(mission: Mission, targets: list[tuple[str, str]]) -> tuple[str,
 
 @dataclass
 class LoadedModels:
-    """Models loaded once and shared by many missions in one process (benchmarks, suites).
+    """Models loaded once and shared by many missions in one process (benchmarks, suites), and the
+    simulator kept warm between them.
 
     A mission that asks for the default image detector or the latent planner with
     this checkpoint uses these instead of loading its own.
@@ -122,6 +126,33 @@ class LoadedModels:
     latent_checkpoint: str | None = None
     detector_checkpoint: str | None = None
     """The checkpoint `detector` was loaded from (None: the shipped weights)."""
+    simulators: WarmSimulators | None = None
+    """A simulated MAVLink vehicle kept warm between the process's missions (`kits.warm`); None: each
+    mission starts its own."""
+
+
+def shared_models(missions: Sequence[Mission]) -> LoadedModels:
+    """The models several missions flown in one process share, loaded once: the image detector of the
+    first that uses one (a mission with another checkpoint loads its own), and the latent planner of the
+    first that flies one (likewise)."""
+    detector, detector_checkpoint = None, None
+    first_image = next((m for m in missions if m.detector == "image"), None)
+    if first_image is not None:
+        from perception.image_detector import ImageDetector  # torch: loaded only when used
+
+        detector_checkpoint = first_image.detector_checkpoint
+        if detector_checkpoint is None:
+            detector = ImageDetector.shipped()
+        else:
+            detector = ImageDetector.load(detector_checkpoint)
+    latent = next((m for m in missions if m.planner == "latent"), None)
+    planner = None if latent is None else make_planner("latent", checkpoint=latent.checkpoint)
+    return LoadedModels(
+        detector=detector,
+        latent=planner,
+        latent_checkpoint=latent and latent.checkpoint,
+        detector_checkpoint=detector_checkpoint,
+    )
 
 
 def models_detector(mission: Mission, models: LoadedModels | None) -> Detector | None:

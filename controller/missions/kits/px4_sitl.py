@@ -36,6 +36,7 @@ from controller.missions.kits.simulated import (
     stream_camera_for,
     vehicle_limits_for,
 )
+from controller.missions.kits.warm import WarmSimulator, WarmSimulators, warm_key
 from controller.missions.schema import Mission
 from controller.missions.setup import start_offset_for
 from drone_inspect_core.ports import free_port
@@ -46,7 +47,7 @@ from flight.sim_launcher import SimulatorProcess
 from sim_world.px4_bridge.bridge import PX4_CLOCK_OFFSET_US, BridgeTiming
 from sim_world.px4_bridge.instances import px4_instance
 from sim_world.px4_bridge.px4_process import find_px4_dir
-from sim_world.px4_bridge.run import READY_PREFIX, Px4SimConfig
+from sim_world.px4_bridge.run import READY_PREFIX, RESET_PREFIX, Px4SimConfig
 from sim_world.px4_bridge.sensors import SensorNoise
 
 log = logging.getLogger(__name__)
@@ -87,68 +88,124 @@ def open_px4_sitl_kit(
     mission: Mission, out_dir: Path, models: LoadedModels | None = None, limits: SafetyLimits | None = None
 ) -> Iterator[FlightKit]:
     """PX4 SITL + bridge (child process) + tlog relay + MAVSDK + MJPEG camera + detector + planner;
-    `limits`: the controller's, which the vehicle's own are made from."""
-    with open_px4_sitl(mission, out_dir, limits) as sim:
+    `limits`: the controller's, which the vehicle's own are made from; `models.simulators`: keep PX4 and
+    its bridge warm for the process's next mission (`kits.warm`)."""
+    warm = models.simulators if models is not None else None
+    with open_px4_sitl(mission, out_dir, limits, warm) as sim:
         yield simulated_mavlink_kit(mission, models, sim)
+
+
+LOG_NAME = "px4_sim.log"
 
 
 @contextmanager
 def open_px4_sitl(
-    mission: Mission, out_dir: Path, limits: SafetyLimits | None = None
+    mission: Mission, out_dir: Path, limits: SafetyLimits | None = None, warm: WarmSimulators | None = None
 ) -> Iterator[SimulatedVehicle]:
     """PX4 SITL and the bridge (a child process), the .tlog relay, MAVSDK and the MJPEG camera; PX4
-    holding limits made from the controller's."""
+    holding limits made from the controller's. With `warm`, the process's warm PX4 and bridge, reset to
+    this mission's world, where they can be."""
     out_dir.mkdir(parents=True, exist_ok=True)
+    key = warm_key(mission, limits) if warm is not None else None
+    if warm is None or key is None:
+        with ExitStack() as stack:
+            simulator = _start(mission, out_dir, limits, "", stack)
+            yield _simulated(mission, out_dir, simulator, limits)
+        return
+
+    def reset(simulator: WarmSimulator) -> None:
+        simulator.reset(_config(mission, out_dir, simulator, limits), out_dir, LOG_NAME)
+
+    with warm.use(key, lambda stack: _start(mission, out_dir, limits, key, stack), reset) as simulator:
+        yield _simulated(mission, out_dir, simulator, limits)
+
+
+def _config(
+    mission: Mission, out_dir: Path, simulator: WarmSimulator, limits: SafetyLimits | None
+) -> Px4SimConfig:
+    """The simulator's configuration for `mission` on `simulator`'s PX4 instance, system id and relay."""
+    info = simulator.info
+    relay_port = simulator.relay.listen_address[1]
+    vehicle_limits = vehicle_limits_for(limits)
+    return px4_sim_config(
+        mission, info["px4_instance"], out_dir, info["px4_system_id"], relay_port, vehicle_limits
+    )
+
+
+def _start(
+    mission: Mission, out_dir: Path, limits: SafetyLimits | None, key: str, stack: ExitStack
+) -> WarmSimulator:
+    """PX4, the bridge, the relay, MAVSDK and the camera, opened on `stack` for `mission`."""
     system_id = new_system_id()  # this run's PX4, and no other
-    with ExitStack() as stack:
-        instance = stack.enter_context(px4_instance(mission.px4.instance))
-        mavsdk_port = free_port("udp")
-        # The relay binds first (a free port): PX4's link sends there.
-        tlog = relay_for(stack, mission, out_dir, system_id, 0, mavsdk_port)
-        vehicle_limits = vehicle_limits_for(limits)
-        config = px4_sim_config(mission, instance, out_dir, system_id, tlog.listen_address[1], vehicle_limits)
-        sim = stack.enter_context(
-            SimulatorProcess(
-                "sim_world.px4_bridge",
-                config,
-                out_dir / "px4_sim.log",
-                READY_PREFIX,
-                start_timeout_s=PX4_START_TIMEOUT_S,
-                name=f"PX4 SITL instance {instance}",
-            )
+    instance = stack.enter_context(px4_instance(mission.px4.instance))
+    mavsdk_port = free_port("udp")
+    # The relay binds first (a free port): PX4's link sends there.
+    tlog = relay_for(stack, mission, out_dir, system_id, 0, mavsdk_port)
+    vehicle_limits = vehicle_limits_for(limits)
+    config = px4_sim_config(mission, instance, out_dir, system_id, tlog.listen_address[1], vehicle_limits)
+    paced = mission.px4.speed == "max"  # the lockstep waits for the controller too (`rig.LockstepPace`)
+    sim = stack.enter_context(
+        SimulatorProcess(
+            "sim_world.px4_bridge",
+            config,
+            out_dir / LOG_NAME,
+            READY_PREFIX,
+            start_timeout_s=PX4_START_TIMEOUT_S,
+            name=f"PX4 SITL instance {instance}",
+            reset_prefix=RESET_PREFIX if key else None,
+            paced=paced,
         )
-        truth = SimTruth(sim.ready["truth_url"])
-        vehicle = stack.enter_context(
-            MavsdkVehicle(
-                MavsdkConfig(
-                    url=f"udpin://127.0.0.1:{mavsdk_port}",
-                    expected_system_id=system_id,
-                    clock="vehicle",  # its link is lost after `LOCKSTEP_LINK_TIMEOUT_S` of silence
-                )
-            )
+    )
+    vehicle = stack.enter_context(
+        MavsdkVehicle(
+            MavsdkConfig(
+                url=f"udpin://127.0.0.1:{mavsdk_port}",
+                expected_system_id=system_id,
+                clock="vehicle",  # its link is lost after `LOCKSTEP_LINK_TIMEOUT_S` of silence
+            ),
+            pacer=sim.pace if paced else None,
+            peer_alive=lambda: sim.alive,  # a PX4 that died ends its bridge: lost at once
         )
-        camera = stream_camera_for(stack, sim)
-        opened = OpenedVehicle(
-            vehicle, camera,
-            info={
-                "backend": "PX4 SITL (real firmware) flying the PyBullet world; MAVSDK + MJPEG",
-                "px4_dir": str(config.px4_dir),
-                "px4_instance": instance,
-                "px4_system_id": system_id,
-                "px4_clock_offset_s": PX4_CLOCK_OFFSET_US / 1e6,
-                "speed": mission.px4.speed,
-                "ports": {
-                    "px4_simulator_tcp": sim.ready.get("simulator_tcp"),
-                    "px4_mavlink_udp": sim.ready.get("px4_mavlink_udp"),
-                    "tlog_relay_udp": tlog.listen_address[1],
-                    "mavsdk_udp": mavsdk_port,
-                    "video_http": sim.ready["video_url"],
-                },
-                "mavlink_signing": "none (PX4 v1.15 cannot sign); the relay takes only this PX4",
-                "vehicle_limits": config.params,
-                "simulator_pid": sim.pid,
-                "px4_pid": sim.ready.get("px4_pid"),
-            },
-            tlog=tlog,
-        )  # fmt: skip
-        yield SimulatedVehicle(opened, truth, config.scene, mission.scene.seed, config.start_offset)
+    )
+    camera = stream_camera_for(stack, sim)
+    info = {
+        "backend": "PX4 SITL (real firmware) flying the PyBullet world; MAVSDK + MJPEG",
+        "px4_dir": str(config.px4_dir),
+        "px4_instance": instance,
+        "px4_system_id": system_id,
+        "px4_clock_offset_s": PX4_CLOCK_OFFSET_US / 1e6,
+        "speed": mission.px4.speed,
+        "ports": {
+            "px4_simulator_tcp": sim.ready.get("simulator_tcp"),
+            "px4_mavlink_udp": sim.ready.get("px4_mavlink_udp"),
+            "tlog_relay_udp": tlog.listen_address[1],
+            "mavsdk_udp": mavsdk_port,
+            "video_http": sim.ready["video_url"],
+        },
+        "mavlink_signing": "none (PX4 v1.15 cannot sign); the relay takes only this PX4",
+        "vehicle_limits": config.params,
+        "simulator_pid": sim.pid,
+        "px4_pid": sim.ready.get("px4_pid"),
+    }
+    return WarmSimulator(key, sim, tlog, vehicle, camera, stack, missions=1, info=info)
+
+
+def _simulated(
+    mission: Mission, out_dir: Path, simulator: WarmSimulator, limits: SafetyLimits | None
+) -> SimulatedVehicle:
+    """The mission's view of the (fresh or reset) PX4 and its world."""
+    config = _config(mission, out_dir, simulator, limits)
+    opened = OpenedVehicle(
+        simulator.vehicle,
+        simulator.camera,
+        info={**simulator.info, "warm_missions": simulator.missions},
+        tlog=simulator.relay,
+    )
+    assert config.start_offset is not None
+    return SimulatedVehicle(
+        opened,
+        SimTruth(simulator.sim.ready["truth_url"]),
+        config.scene,
+        mission.scene.seed,
+        config.start_offset,
+    )

@@ -34,8 +34,9 @@ from controller.missions.kits.simulated import (
     stream_camera_for,
     vehicle_limits_for,
 )
+from controller.missions.kits.warm import WarmSimulator, WarmSimulators, warm_key
 from controller.missions.schema import Mission
-from controller.missions.setup import start_offset_for
+from controller.missions.setup import scene_config_for, start_offset_for
 from drone_inspect_core.ports import check_free, free_port
 from drone_inspect_core.signing import SigningKey
 from drone_inspect_core.vehicle_limits import VehicleLimits
@@ -45,6 +46,7 @@ from flight.safety import SafetyLimits
 from flight.sim_launcher import SimulatorProcess
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.serve import READY_PREFIX as SIM_READY_PREFIX
+from sim_world.vehicle.serve import RESET_PREFIX as SIM_RESET_PREFIX
 from sim_world.vehicle.serve import SimVehicleRun, secret_json
 
 READY_TIMEOUT_S = 60.0
@@ -84,21 +86,47 @@ def open_sim_mavlink_kit(
     mission: Mission, out_dir: Path, models: LoadedModels | None = None, limits: SafetyLimits | None = None
 ) -> Iterator[FlightKit]:
     """sim-vehicle subprocess + tlog relay + MAVSDK + MJPEG stream camera + detector + planner;
-    `limits`: the controller's, which the vehicle's own are made from."""
-    with open_sim_mavlink(mission, out_dir, limits) as sim:
+    `limits`: the controller's, which the vehicle's own are made from; `models.simulators`: keep the
+    simulator warm for the process's next mission (`kits.warm`)."""
+    warm = models.simulators if models is not None else None
+    with open_sim_mavlink(mission, out_dir, limits, warm) as sim:
         yield simulated_mavlink_kit(mission, models, sim)
 
 
 @contextmanager
 def open_sim_mavlink(
-    mission: Mission, out_dir: Path, limits: SafetyLimits | None = None
+    mission: Mission, out_dir: Path, limits: SafetyLimits | None = None, warm: WarmSimulators | None = None
 ) -> Iterator[SimulatedVehicle]:
     """The mission's sim-vehicle (a subprocess), the .tlog relay, MAVSDK and the MJPEG stream camera; the
-    link signed with a key made for the run, the vehicle holding limits made from the controller's."""
+    link signed with a key made for the run, the vehicle holding limits made from the controller's.
+    With `warm`, the process's warm sim-vehicle reset to this mission's world where it can be."""
     start = start_offset_for(mission, SIM_HFOV_DEG, SIM_HFOV_DEG)  # square image
     out_dir.mkdir(parents=True, exist_ok=True)
+    key = warm_key(mission, limits) if warm is not None else None
+    if warm is None or key is None:
+        with ExitStack() as stack:
+            started = _start(mission, out_dir, limits, start, "", stack)
+            yield _simulated(mission, started, start)
+        return
+
+    def reset(simulator: WarmSimulator) -> None:  # the key is the running vehicle's own, kept by it
+        system_id, relay_port = simulator.info["system_id"], simulator.relay.listen_address[1]
+        run = sim_vehicle_run(mission, start, system_id, relay_port, None, vehicle_limits_for(limits))
+        simulator.reset(run, out_dir, LOG_NAME)
+
+    with warm.use(key, lambda stack: _start(mission, out_dir, limits, start, key, stack), reset) as simulator:
+        yield _simulated(mission, simulator, start)
+
+
+LOG_NAME = "sim_vehicle.log"
+
+
+def _start(
+    mission: Mission, out_dir: Path, limits: SafetyLimits | None, start: StartPose, key: str, stack: ExitStack
+) -> WarmSimulator:
+    """The sim-vehicle, its relay, MAVSDK and the camera, opened on `stack` for `mission`."""
     system_id = new_system_id()
-    key = SigningKey.generate()  # this run's link, and no other
+    signing_key = SigningKey.generate()  # this run's link, and no other
     p, http = mission.ports.mavlink_udp, mission.ports.http
     if p == "auto":
         relay_port, mavsdk_port = 0, free_port("udp")
@@ -107,45 +135,47 @@ def open_sim_mavlink(
         check_free([("udp", p, "sim-vehicle"), ("udp", p + 1, "relay"), ("udp", p + 2, "MAVSDK")])
     if http != "auto":
         check_free([("tcp", http, "sim-vehicle video")])
-    with ExitStack() as stack:
-        # The relay binds first: the sim-vehicle streams to the port it got.
-        tlog = relay_for(stack, mission, out_dir, system_id, relay_port, mavsdk_port, signing_key=key)
-        vehicle_limits = vehicle_limits_for(limits)
-        run = sim_vehicle_run(mission, start, system_id, tlog.listen_address[1], key, vehicle_limits)
-        sim = stack.enter_context(
-            SimulatorProcess(
-                "sim_world.vehicle", run, out_dir / "sim_vehicle.log", SIM_READY_PREFIX,
-                start_timeout_s=READY_TIMEOUT_S, name="sim-vehicle", secrets=secret_json(run),
-            )
-        )  # fmt: skip
-        truth = SimTruth(sim.ready["truth_url"])
-        # Off real time, the controller times its moves, settling and waits on the vehicle's clock.
-        clock = "wall" if mission.sim_speed == 1.0 else "vehicle"
-        vehicle = stack.enter_context(
-            MavsdkVehicle(
-                MavsdkConfig(
-                    url=f"udpin://127.0.0.1:{mavsdk_port}", expected_system_id=system_id, clock=clock
-                )
-            )
+    # The relay binds first: the sim-vehicle streams to the port it got.
+    tlog = relay_for(stack, mission, out_dir, system_id, relay_port, mavsdk_port, signing_key=signing_key)
+    vehicle_limits = vehicle_limits_for(limits)
+    run = sim_vehicle_run(mission, start, system_id, tlog.listen_address[1], signing_key, vehicle_limits)
+    sim = stack.enter_context(
+        SimulatorProcess(
+            "sim_world.vehicle", run, out_dir / LOG_NAME, SIM_READY_PREFIX,
+            start_timeout_s=READY_TIMEOUT_S, name="sim-vehicle", secrets=secret_json(run),
+            reset_prefix=SIM_RESET_PREFIX if key else None,
         )
-        camera = stream_camera_for(stack, sim)
-        opened = OpenedVehicle(
-            vehicle, camera,
-            info={
-                "backend": "sim-vehicle subprocess over MAVLink (MAVSDK) + MJPEG stream",
-                "ports": {
-                    "sim_udp": sim.ready["local_address"][1],
-                    "tlog_relay_udp": tlog.listen_address[1],
-                    "mavsdk_udp": mavsdk_port,
-                    "video_http": sim.ready["video_url"],
-                },
-                "tlog": "recorded by flight.relay between sim-vehicle and MAVSDK",
-                "system_id": system_id,
-                "mavlink_signing": "a key made for this run (the relay signs for MAVSDK)",
-                "vehicle_limits": asdict(vehicle_limits),
-                "sim_speed": mission.sim_speed,
-                "simulator_pid": sim.pid,
-            },
-            tlog=tlog,
-        )  # fmt: skip
-        yield SimulatedVehicle(opened, truth, run.scene, mission.scene.seed, start)
+    )  # fmt: skip
+    # Off real time, the controller times its moves, settling and waits on the vehicle's clock.
+    clock = "wall" if mission.sim_speed == 1.0 else "vehicle"
+    vehicle = stack.enter_context(
+        MavsdkVehicle(
+            MavsdkConfig(url=f"udpin://127.0.0.1:{mavsdk_port}", expected_system_id=system_id, clock=clock),
+            peer_alive=lambda: sim.alive,
+        )
+    )
+    camera = stream_camera_for(stack, sim)
+    info = {
+        "backend": "sim-vehicle subprocess over MAVLink (MAVSDK) + MJPEG stream",
+        "ports": {
+            "sim_udp": sim.ready["local_address"][1],
+            "tlog_relay_udp": tlog.listen_address[1],
+            "mavsdk_udp": mavsdk_port,
+            "video_http": sim.ready["video_url"],
+        },
+        "tlog": "recorded by flight.relay between sim-vehicle and MAVSDK",
+        "system_id": system_id,
+        "mavlink_signing": "a key made for this run (the relay signs for MAVSDK)",
+        "vehicle_limits": asdict(vehicle_limits),
+        "sim_speed": mission.sim_speed,
+        "simulator_pid": sim.pid,
+    }
+    return WarmSimulator(key, sim, tlog, vehicle, camera, stack, missions=1, info=info)
+
+
+def _simulated(mission: Mission, simulator: WarmSimulator, start: StartPose) -> SimulatedVehicle:
+    """The mission's view of the (fresh or reset) simulator."""
+    info = {**simulator.info, "warm_missions": simulator.missions}
+    opened = OpenedVehicle(simulator.vehicle, simulator.camera, info=info, tlog=simulator.relay)
+    truth = SimTruth(simulator.sim.ready["truth_url"])
+    return SimulatedVehicle(opened, truth, scene_config_for(mission), mission.scene.seed, start)
