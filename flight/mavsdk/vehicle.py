@@ -45,7 +45,13 @@ from flight.errors import (
     OffboardInterruptedError,
     VehicleConnectionError,
 )
-from flight.mavsdk.link import MavsdkConfig, TelemetryCache, resend_on_timeout, route_mavsdk_logs
+from flight.mavsdk.link import (
+    COMMAND_ATTEMPTS,
+    MavsdkConfig,
+    TelemetryCache,
+    resend_on_timeout,
+    route_mavsdk_logs,
+)
 from flight.pacing import Pacer
 from flight.types import Closable, FlightMode, Telemetry, VelocityBody
 from flight.vehicle import Deadline, Vehicle, wait_for
@@ -58,6 +64,8 @@ READY_REPORT_EVERY_S = 5.0
 DISARM_RACE_WAIT_S = 3.0
 OFFBOARD_START_ATTEMPTS = 3
 LAST_LAND_ACK_WAIT_S = 0.5
+TAKEOFF_ALTITUDE_SAME_M = 0.01
+"""A takeoff altitude this close to PX4's is not set again (each set makes PX4 save its parameters)."""
 """After a lost link: how long the last LAND waits for an ack (MAVSDK keeps resending it meanwhile)."""
 
 
@@ -288,7 +296,7 @@ class MavsdkVehicle(Vehicle):
             raise ValueError(f"takeoff altitude must be a positive number of metres, got {altitude_m!r}")
         try:
             with self._pacer.blocked():
-                resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m), self._cache.link)
+                self._set_takeoff_altitude(action, altitude_m)
                 resend_on_timeout(action.takeoff, self._cache.link)
         except ActionError as exc:
             armed = self.telemetry().armed
@@ -309,6 +317,27 @@ class MavsdkVehicle(Vehicle):
             "takeoff()",
             f"in-air state, altitude {target_m:.2f} m, the takeoff mode left and the climb ending",
         )
+
+    def _set_takeoff_altitude(self, action: Action, altitude_m: float) -> None:
+        """PX4's takeoff altitude (MIS_TAKEOFF_ALT), set only where it differs and confirmed by reading it
+        back. Sending the set again on a timeout while MAVSDK still retried the first let an old value
+        reach a warm PX4 after the next mission's, racing PX4's parameter autosave; in lockstep PX4 then
+        stalled for good (a verify failure in its export, its simulator link silent: LINK_LOST)."""
+        attempt_max = COMMAND_ATTEMPTS
+        for attempt in range(1, attempt_max + 1):
+            try:
+                if abs(action.get_takeoff_altitude() - altitude_m) < TAKEOFF_ALTITUDE_SAME_M:
+                    return
+                action.set_takeoff_altitude(altitude_m)
+            except ActionError as exc:
+                if exc.result.name != "TIMEOUT":
+                    raise
+                if attempt == attempt_max:
+                    self._cache.link.raise_if_lost(str(exc.origin))
+                    raise
+                log.warning(
+                    "%s timed out (no ack): asking again (%d of %d)", exc.origin, attempt + 1, attempt_max
+                )
 
     def set_velocity_body(self, velocity: VelocityBody) -> None:
         offboard = self._require(self._offboard, "set_velocity_body()")
