@@ -45,13 +45,7 @@ from flight.errors import (
     OffboardInterruptedError,
     VehicleConnectionError,
 )
-from flight.mavsdk.link import (
-    COMMAND_ATTEMPTS,
-    MavsdkConfig,
-    TelemetryCache,
-    resend_on_timeout,
-    route_mavsdk_logs,
-)
+from flight.mavsdk.link import MavsdkConfig, TelemetryCache, resend_on_timeout, route_mavsdk_logs
 from flight.pacing import Pacer
 from flight.types import Closable, FlightMode, Telemetry, VelocityBody
 from flight.vehicle import Deadline, Vehicle, wait_for
@@ -64,8 +58,11 @@ READY_REPORT_EVERY_S = 5.0
 DISARM_RACE_WAIT_S = 3.0
 OFFBOARD_START_ATTEMPTS = 3
 LAST_LAND_ACK_WAIT_S = 0.5
-TAKEOFF_ALTITUDE_SAME_M = 0.01
-"""A takeoff altitude this close to PX4's is not set again (each set makes PX4 save its parameters)."""
+ARMING_SAVE_S = 1.0
+"""On a simulated autopilot in lockstep, the vehicle-clock seconds after arming before the takeoff altitude
+is set. PX4 saves its parameters when it arms (the flight's UUID); a set arriving while that save ran
+failed its verify, and PX4 in lockstep then stalled for good (its simulator link silent: LINK_LOST),
+about one px4-sitl benchmark mission in 12 to 20 on a warm PX4."""
 """After a lost link: how long the last LAND waits for an ack (MAVSDK keeps resending it meanwhile)."""
 
 
@@ -101,6 +98,7 @@ class MavsdkVehicle(Vehicle):
         self._last_setpoint = VelocityBody()
         self._in_offboard = False
         self._ground_down_m = math.nan
+        self._armed_at_s = -math.inf  # the vehicle's clock when arming was confirmed
 
     # --- connection ---------------------------------------------------------------------------
     def connect(self, timeout_s: float | None = None) -> None:
@@ -287,6 +285,7 @@ class MavsdkVehicle(Vehicle):
                 log.info("arming refused (%s; %r): retrying", exc.result.name, self._last_text())
                 self.sleep(self.config.arm_retry_period_s)
         self._wait(lambda t: t.armed, max(0.5, deadline.remaining_s()), "arm()", "armed state in telemetry")
+        self._armed_at_s = self.time_s()
         if not math.isfinite(self._ground_down_m):
             self._ground_down_m = self.telemetry().position_ned.down_m
 
@@ -294,9 +293,11 @@ class MavsdkVehicle(Vehicle):
         action = self._require(self._action, "takeoff()")
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise ValueError(f"takeoff altitude must be a positive number of metres, got {altitude_m!r}")
+        if self.config.clock == "vehicle":  # PX4's own parameter save at arming first (`ARMING_SAVE_S`)
+            self.sleep(max(0.0, ARMING_SAVE_S - (self.time_s() - self._armed_at_s)))
         try:
             with self._pacer.blocked():
-                self._set_takeoff_altitude(action, altitude_m)
+                resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m), self._cache.link)
                 resend_on_timeout(action.takeoff, self._cache.link)
         except ActionError as exc:
             armed = self.telemetry().armed
@@ -317,27 +318,6 @@ class MavsdkVehicle(Vehicle):
             "takeoff()",
             f"in-air state, altitude {target_m:.2f} m, the takeoff mode left and the climb ending",
         )
-
-    def _set_takeoff_altitude(self, action: Action, altitude_m: float) -> None:
-        """PX4's takeoff altitude (MIS_TAKEOFF_ALT), set only where it differs and confirmed by reading it
-        back. Sending the set again on a timeout while MAVSDK still retried the first let an old value
-        reach a warm PX4 after the next mission's, racing PX4's parameter autosave; in lockstep PX4 then
-        stalled for good (a verify failure in its export, its simulator link silent: LINK_LOST)."""
-        attempt_max = COMMAND_ATTEMPTS
-        for attempt in range(1, attempt_max + 1):
-            try:
-                if abs(action.get_takeoff_altitude() - altitude_m) < TAKEOFF_ALTITUDE_SAME_M:
-                    return
-                action.set_takeoff_altitude(altitude_m)
-            except ActionError as exc:
-                if exc.result.name != "TIMEOUT":
-                    raise
-                if attempt == attempt_max:
-                    self._cache.link.raise_if_lost(str(exc.origin))
-                    raise
-                log.warning(
-                    "%s timed out (no ack): asking again (%d of %d)", exc.origin, attempt + 1, attempt_max
-                )
 
     def set_velocity_body(self, velocity: VelocityBody) -> None:
         offboard = self._require(self._offboard, "set_velocity_body()")
