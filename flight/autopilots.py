@@ -107,6 +107,9 @@ class MavlinkVehicle(Vehicle):
     def wait_ready(self, timeout_s: float | None = None) -> None:
         self._require("wait_ready()").wait_ready(timeout_s)
 
+    def prepare_takeoff(self, altitude_m: float, timeout_s: float | None = None) -> None:
+        self._require("prepare_takeoff()").prepare_takeoff(altitude_m, timeout_s)
+
     def arm(self, timeout_s: float | None = None) -> None:
         self._require("arm()").arm(timeout_s)
 

@@ -161,6 +161,7 @@ def take_off_to_start(
     clock = {} if clock is None else clock
     vehicle.wait_ready()
     clock["ready_s"] = vehicle.time_s()
+    vehicle.prepare_takeoff(altitude_m)
     vehicle.arm()
     vehicle.takeoff(altitude_m)
     if place_at_start is not None:

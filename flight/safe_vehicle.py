@@ -119,6 +119,9 @@ class SafeVehicle(Vehicle):
     def wait_ready(self, timeout_s: float | None = None) -> None:
         self.inner.wait_ready(timeout_s or self.limits.timeouts.ready_s)
 
+    def prepare_takeoff(self, altitude_m: float, timeout_s: float | None = None) -> None:
+        self.inner.prepare_takeoff(altitude_m, timeout_s or self.limits.timeouts.arm_s)
+
     def arm(self, timeout_s: float | None = None) -> None:
         self.inner.arm(timeout_s or self.limits.timeouts.arm_s)
         if self.origin is None:

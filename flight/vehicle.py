@@ -42,6 +42,10 @@ class Vehicle(abc.ABC):
     def wait_ready(self, timeout_s: float | None = None) -> None:
         """Wait until the position estimate and home position are valid (needed for offboard)."""
 
+    def prepare_takeoff(self, altitude_m: float, timeout_s: float | None = None) -> None:  # noqa: B027
+        """Before arming: what the backend sets ahead of a takeoff to `altitude_m` (PX4 through MAVSDK: its
+        takeoff altitude parameter); nothing by default."""
+
     @abc.abstractmethod
     def arm(self, timeout_s: float | None = None) -> None:
         """Arm, retrying while the autopilot says 'temporarily rejected', until armed shows in telemetry."""

@@ -72,6 +72,10 @@ class StoppableVehicle(Vehicle):
                 return
             self.inner.sleep(min(STOP_POLL_S, left_s))
 
+    def prepare_takeoff(self, altitude_m: float, timeout_s: float | None = None) -> None:
+        self.check()
+        self.inner.prepare_takeoff(altitude_m, timeout_s)
+
     def arm(self, timeout_s: float | None = None) -> None:
         self.check()
         self.inner.arm(timeout_s)

@@ -58,11 +58,14 @@ READY_REPORT_EVERY_S = 5.0
 DISARM_RACE_WAIT_S = 3.0
 OFFBOARD_START_ATTEMPTS = 3
 LAST_LAND_ACK_WAIT_S = 0.5
-ARMING_SAVE_S = 1.0
-"""On a simulated autopilot in lockstep, the vehicle-clock seconds after arming before the takeoff altitude
-is set. PX4 saves its parameters when it arms (the flight's UUID); a set arriving while that save ran
-failed its verify, and PX4 in lockstep then stalled for good (its simulator link silent: LINK_LOST),
-about one px4-sitl benchmark mission in 12 to 20 on a warm PX4."""
+PARAMETER_SAVE_S = 0.5
+"""Vehicle-clock seconds left after setting the takeoff altitude, before arming, for PX4 to save its
+parameters (it does 0.3 s after a change). PX4 saves them again when it arms (the flight's UUID); a set
+arriving while a save ran failed its verify ("invalid BSON value"), and PX4 in lockstep then stalled for
+good (its simulator link silent: LINK_LOST), about one px4-sitl benchmark mission in 12 to 20 on a warm
+PX4 while the altitude was set after arming. So `prepare_takeoff` sets it before arming, and waits."""
+TAKEOFF_ALTITUDE_SAME_M = 0.005
+"""A takeoff altitude this close to the one set is not set again."""
 """After a lost link: how long the last LAND waits for an ack (MAVSDK keeps resending it meanwhile)."""
 
 
@@ -98,7 +101,7 @@ class MavsdkVehicle(Vehicle):
         self._last_setpoint = VelocityBody()
         self._in_offboard = False
         self._ground_down_m = math.nan
-        self._armed_at_s = -math.inf  # the vehicle's clock when arming was confirmed
+        self._takeoff_altitude_m = math.nan  # the takeoff altitude last set (PX4 keeps it)
 
     # --- connection ---------------------------------------------------------------------------
     def connect(self, timeout_s: float | None = None) -> None:
@@ -285,19 +288,34 @@ class MavsdkVehicle(Vehicle):
                 log.info("arming refused (%s; %r): retrying", exc.result.name, self._last_text())
                 self.sleep(self.config.arm_retry_period_s)
         self._wait(lambda t: t.armed, max(0.5, deadline.remaining_s()), "arm()", "armed state in telemetry")
-        self._armed_at_s = self.time_s()
         if not math.isfinite(self._ground_down_m):
             self._ground_down_m = self.telemetry().position_ned.down_m
+
+    def prepare_takeoff(self, altitude_m: float, timeout_s: float | None = None) -> None:
+        """PX4's takeoff altitude (MIS_TAKEOFF_ALT) set before arming, then `PARAMETER_SAVE_S` for PX4's
+        save of it; `takeoff` sets it only if this was not done for its altitude."""
+        action = self._require(self._action, "prepare_takeoff()")
+        if not (math.isfinite(altitude_m) and altitude_m > 0):
+            raise ValueError(f"takeoff altitude must be a positive number of metres, got {altitude_m!r}")
+        if abs(altitude_m - self._takeoff_altitude_m) <= TAKEOFF_ALTITUDE_SAME_M:
+            return
+        try:
+            with self._pacer.blocked():
+                resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m), self._cache.link)
+        except ActionError as exc:
+            raise CommandDeniedError(exc.origin, exc.result.name, self._last_text()) from None
+        self._takeoff_altitude_m = altitude_m
+        self.sleep(PARAMETER_SAVE_S)
 
     def takeoff(self, altitude_m: float, timeout_s: float | None = None) -> None:
         action = self._require(self._action, "takeoff()")
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise ValueError(f"takeoff altitude must be a positive number of metres, got {altitude_m!r}")
-        if self.config.clock == "vehicle":  # PX4's own parameter save at arming first (`ARMING_SAVE_S`)
-            self.sleep(max(0.0, ARMING_SAVE_S - (self.time_s() - self._armed_at_s)))
         try:
             with self._pacer.blocked():
-                resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m), self._cache.link)
+                if not abs(altitude_m - self._takeoff_altitude_m) <= TAKEOFF_ALTITUDE_SAME_M:  # unprepared
+                    resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m), self._cache.link)
+                    self._takeoff_altitude_m = altitude_m
                 resend_on_timeout(action.takeoff, self._cache.link)
         except ActionError as exc:
             armed = self.telemetry().armed
