@@ -12,13 +12,12 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from controller.benchmarks.browser import chromium_missing, open_browser
+from controller.benchmarks.browser import chromium_missing, open_browser, until
 from controller.console.run import ConsoleOptions, open_console
 from controller.missions.schema import load_mission
 from flight.types import FlightMode
@@ -30,14 +29,6 @@ SHOTS = os.environ.get("DRONECTL_CONSOLE_SCREENSHOTS")
 pytestmark = pytest.mark.skipif(chromium_missing() is not None, reason=str(chromium_missing()))
 
 
-def _until(what: str, check: Callable[[], Any], timeout_s: float) -> Any:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        value = check()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise AssertionError(f"not within {timeout_s} s: {what}")
 
 
 def _shot(page: Any, name: str) -> None:
@@ -66,8 +57,8 @@ def test_the_console_in_a_browser(tmp_path: Path) -> None:
         page = browser.new_page()
         page.goto(console.url)
         # --- the page loads, video frames arrive, the page commands
-        _until("video frames on the page", lambda: page.evaluate("window.consoleStats.frames") >= 10, 30)
-        _until("telemetry on the page", lambda: page.text_content("#t-mode") == "ready", 10)
+        until("video frames on the page", lambda: page.evaluate("window.consoleStats.frames") >= 10, 30)
+        until("telemetry on the page", lambda: page.text_content("#t-mode") == "ready", 10)
         assert page.text_content("#seat") == "you command"
         assert page.text_content("#t-link") == "ok"
         # --- bad instructions: a message on the page, no flight
@@ -78,18 +69,18 @@ def test_the_console_in_a_browser(tmp_path: Path) -> None:
         ):
             page.fill("#instruction", text)
             page.press("#instruction", "Enter")
-            _until(f"the refusal of {text!r}", lambda said=said: any(said in m for m in _messages(page)), 10)
+            until(f"the refusal of {text!r}", lambda said=said: any(said in m for m in _messages(page)), 10)
         assert page.locator("#log tbody tr").count() == 0 and session.results == []
         # --- take off, then centre the gauge
         page.click("#btn-takeoff")
-        _until("airborne and holding", lambda: session.phase.value == "holding", 90)
+        until("airborne and holding", lambda: session.phase.value == "holding", 90)
         _shot(page, "1-airborne")
         page.fill("#instruction", "centre the gauge")
         page.press("#instruction", "Enter")
-        _until("the first step drawn", lambda: page.evaluate("window.consoleStats.steps") >= 1, 30)
+        until("the first step drawn", lambda: page.evaluate("window.consoleStats.steps") >= 1, 30)
         _shot(page, "2-centring")
         assert page.locator(".bar").count() == 9
-        outcome = _until("instruction 1 ended", lambda: _ended(page, 1), 120)
+        outcome = until("instruction 1 ended", lambda: _ended(page, 1), 120)
         assert outcome == "centred"
         first = session.results[0]
         truth = first.final_truth_offset_px
@@ -103,29 +94,29 @@ def test_the_console_in_a_browser(tmp_path: Path) -> None:
         others = [t for t in session.kit.info.get("targets", []) if t["kind"] != "gauge"]
         page.fill("#instruction", f"centre the {others[0]['kind']}")
         page.press("#instruction", "Enter")
-        _until("centring the second", lambda: session.phase.value == "centring", 20)
+        until("centring the second", lambda: session.phase.value == "centring", 20)
         page.click("#btn-hold")
-        _until("HOLD mode", lambda: session.vehicle.telemetry().flight_mode is FlightMode.HOLD, 10)
-        _until("HOLD on the page", lambda: page.text_content("#t-mode") == "hold", 10)
-        assert _until("instruction 2 ended", lambda: _ended(page, 2), 30) == "stopped"
+        until("HOLD mode", lambda: session.vehicle.telemetry().flight_mode is FlightMode.HOLD, 10)
+        until("HOLD on the page", lambda: page.text_content("#t-mode") == "hold", 10)
+        assert until("instruction 2 ended", lambda: _ended(page, 2), 30) == "stopped"
         _shot(page, "4-held")
         # --- a second tab watches; closing the commanding page mid-centring holds
         watcher = browser.new_page()
         watcher.goto(console.url)
-        _until("the second tab watches", lambda: "watching" in (watcher.text_content("#seat") or ""), 10)
+        until("the second tab watches", lambda: "watching" in (watcher.text_content("#seat") or ""), 10)
         assert watcher.is_disabled("#btn-hold") and watcher.is_disabled("#instruction")
         page.fill("#instruction", f"centre the {others[-1]['kind']}")
         page.press("#instruction", "Enter")
-        _until("centring the third", lambda: session.phase.value == "centring", 20)
+        until("centring the third", lambda: session.phase.value == "centring", 20)
         page.close()
         held = lambda: session.vehicle.telemetry().flight_mode is FlightMode.HOLD  # noqa: E731
-        _until("held after the page closed", held, 15)
-        assert _until("instruction 3 ended", lambda: _ended(watcher, 3), 30) == "stopped"
+        until("held after the page closed", held, 15)
+        assert until("instruction 3 ended", lambda: _ended(watcher, 3), 30) == "stopped"
         assert session.vehicle.telemetry().in_air  # held in the air, not landed
         # --- the seat is free: the watcher takes it; Kill asks to confirm, then stops the motors
-        _until("the seat free", lambda: watcher.is_visible("#take-seat"), 10)
+        until("the seat free", lambda: watcher.is_visible("#take-seat"), 10)
         watcher.click("#take-seat")
-        _until("the watcher commands", lambda: watcher.text_content("#seat") == "you command", 10)
+        until("the watcher commands", lambda: watcher.text_content("#seat") == "you command", 10)
         watcher.click("#btn-kill")
         assert watcher.is_visible("#kill-confirm")
         watcher.click("#btn-kill-cancel")
@@ -133,5 +124,5 @@ def test_the_console_in_a_browser(tmp_path: Path) -> None:
         assert session.vehicle.telemetry().armed
         watcher.click("#btn-kill")
         watcher.click("#btn-kill-confirm")
-        _until("motors stopped", lambda: not session.vehicle.telemetry().armed, 10)
+        until("motors stopped", lambda: not session.vehicle.telemetry().armed, 10)
         assert session.phase.value == "killed"

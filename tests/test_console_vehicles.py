@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 from websockets.sync.client import connect
 
-from controller.benchmarks.browser import chromium_missing, open_browser
+from controller.benchmarks.browser import chromium_missing, open_browser, until
 from controller.console.run import ConsoleOptions, open_console
 from controller.missions.schema import load_mission
 from flight.types import FlightMode
@@ -28,14 +28,6 @@ REPO = Path(__file__).resolve().parents[1]
 MISSION = REPO / "missions" / "regression" / "three_targets.yaml"
 
 
-def _until(what: str, check, timeout_s: float):  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        value = check()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise AssertionError(f"not within {timeout_s} s: {what}")
 
 
 def _children(pid: int) -> list[int]:
@@ -60,40 +52,40 @@ def test_the_console_through_sim_mavlink_holds_on_the_button_a_lost_video_and_a_
         in_hold = lambda: session.vehicle.telemetry().flight_mode is FlightMode.HOLD  # noqa: E731
         page = browser.new_page()
         page.goto(console.url)
-        _until("frames from the MJPEG stream", lambda: page.evaluate("window.consoleStats.frames") >= 10, 60)
+        until("frames from the MJPEG stream", lambda: page.evaluate("window.consoleStats.frames") >= 10, 60)
         page.click("#btn-takeoff")
-        _until("airborne", lambda: session.phase.value == "holding", 120)
+        until("airborne", lambda: session.phase.value == "holding", 120)
         # --- the Hold button
         page.fill("#instruction", "centre the switch box")
         page.press("#instruction", "Enter")
-        _until("the loop flying", lambda: page.evaluate("window.consoleStats.steps") >= 1, 60)
+        until("the loop flying", lambda: page.evaluate("window.consoleStats.steps") >= 1, 60)
         page.click("#btn-hold")
-        _until("HOLD mode", in_hold, 10)
-        _until("HOLD on the page", lambda: page.text_content("#t-mode") == "hold", 10)
+        until("HOLD mode", in_hold, 10)
+        until("HOLD on the page", lambda: page.text_content("#t-mode") == "hold", 10)
         # --- the video dies mid-centring (its render process killed): shown, and the vehicle holds
         page.fill("#instruction", "centre the gauge")
         page.press("#instruction", "Enter")
-        _until("the loop flying again", lambda: session.phase.value == "centring", 30)
+        until("the loop flying again", lambda: session.phase.value == "centring", 30)
         for child in _children(console.session.kit.info["simulator_pid"]):
             os.kill(child, signal.SIGKILL)  # the sim-vehicle's camera process: MAVLink goes on
-        _until("VIDEO LOST on the page", lambda: page.is_visible("#video-lost"), 10)
-        _until("held after the video was lost", in_hold, 15)
-        assert _until("the loop stopped", lambda: session.results[-1:], 30)[0].outcome.value == "stopped"
+        until("VIDEO LOST on the page", lambda: page.is_visible("#video-lost"), 10)
+        until("held after the video was lost", in_hold, 15)
+        assert until("the loop stopped", lambda: session.results[-1:], 30)[0].outcome.value == "stopped"
         assert any("video lost" in m["text"] for m in page.evaluate("window.consoleStats.messages"))
         # --- the link is lost (no telemetry reaches the console): shown on the page
         session.kit.tlog.drop_downlink = True  # the relay between the sim-vehicle and MAVSDK
-        _until("link lost on the page", lambda: page.text_content("#t-link") == "lost", 30)
+        until("link lost on the page", lambda: page.text_content("#t-link") == "lost", 30)
         session.kit.tlog.drop_downlink = False
-        _until("link back", lambda: page.text_content("#t-link") == "ok", 30)
+        until("link back", lambda: page.text_content("#t-link") == "ok", 30)
         assert session.vehicle.telemetry().flight_mode is not FlightMode.OFFBOARD  # nothing steers it
         # --- Kill during a landing acts at once, not after it
         page.click("#btn-land")
-        _until("landing", lambda: session.phase.value == "landing", 10)
+        until("landing", lambda: session.phase.value == "landing", 10)
         page.click("#btn-kill")
         page.click("#btn-kill-confirm")
-        _until("motors stopped", lambda: not session.vehicle.telemetry().armed, 20)
+        until("motors stopped", lambda: not session.vehicle.telemetry().armed, 20)
         log = {r["name"]: r for r in console.pilot.command_log}
-        _until("both calls returned", lambda: "done_s" in log["land"] and "done_s" in log["kill"], 60)
+        until("both calls returned", lambda: "done_s" in log["land"] and "done_s" in log["kill"], 60)
         assert log["kill"]["done_s"] <= log["land"]["done_s"]  # the Kill did not wait for the landing
         assert session.phase.value == "killed"
     assert [r.outcome.value for r in console.session.results] == ["stopped", "stopped"]

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import shutil
 import tempfile
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -50,3 +51,15 @@ def open_browser() -> Iterator[Any]:
                 context.close()
     finally:
         shutil.rmtree(profile, ignore_errors=True)
+
+
+def until(what: str, check: Callable[[], Any], timeout_s: float, poll_s: float = 0.05) -> Any:
+    """Poll `check` until it returns something true (returned), or raise `TimeoutError` naming `what`:
+    how the console's benchmark and its browser tests wait for the page."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = check()
+        if value:
+            return value
+        time.sleep(poll_s)
+    raise TimeoutError(f"not within {timeout_s:g} s: {what}")

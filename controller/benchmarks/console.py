@@ -23,7 +23,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from controller.benchmarks.browser import open_browser
+from controller.benchmarks.browser import open_browser, until
 from controller.console.run import ConsoleOptions, open_console
 from controller.missions.schema import Mission
 from flight.types import FlightMode
@@ -78,14 +78,6 @@ def _quantiles(values: list[float]) -> dict[str, float]:
     }  # fmt: skip
 
 
-def _until(what: str, check: Any, timeout_s: float) -> Any:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        value = check()
-        if value:
-            return value
-        time.sleep(0.05)
-    raise TimeoutError(f"not within {timeout_s:g} s: {what}")
 
 
 def run_console_bench(settings: ConsoleBenchSettings) -> ConsoleBenchResult:
@@ -96,9 +88,9 @@ def run_console_bench(settings: ConsoleBenchSettings) -> ConsoleBenchResult:
         session, pilot = console.session, console.pilot
         page = browser.new_page()
         page.goto(console.url)
-        _until("the first frames", lambda: page.evaluate("window.consoleStats.frames") >= 5, 60)
+        until("the first frames", lambda: page.evaluate("window.consoleStats.frames") >= 5, 60)
         page.click("#btn-takeoff")
-        _until("airborne and holding", lambda: session.phase.value == "holding", 180)
+        until("airborne and holding", lambda: session.phase.value == "holding", 180)
         time.sleep(1.0)
         page.evaluate("window.consoleStats.frames = 0; window.consoleStats.firstFrameMs = null; "
                       "window.consoleStats.latencyMs = [];")  # fmt: skip
@@ -119,7 +111,7 @@ def run_console_bench(settings: ConsoleBenchSettings) -> ConsoleBenchResult:
             page.fill("#instruction", f"centre the {_farthest_kind(session)}")
             page.press("#instruction", "Enter")
             try:
-                _until("the loop flying", lambda b=steps_before: page.evaluate(STEPS_JS) > b, 30)
+                until("the loop flying", lambda b=steps_before: page.evaluate(STEPS_JS) > b, 30)
             except TimeoutError:
                 said = page.evaluate("window.consoleStats.messages.slice(-1)")
                 result.notes.append(f"hold {i + 1}: the loop did not start ({said}); skipped")
@@ -135,7 +127,7 @@ def run_console_bench(settings: ConsoleBenchSettings) -> ConsoleBenchResult:
                 result.hold_s.append(round(seen - record["pressed_s"], 4))
                 result.hold_to_thread_s.append(round(record["started_s"] - record["pressed_s"], 4))
                 result.hold_call_s.append(round(record.get("done_s", seen) - record["started_s"], 4))
-            _until("the loop stopped", lambda: not pilot.busy, 30)
+            until("the loop stopped", lambda: not pilot.busy, 30)
         result.hold_summary = _quantiles(result.hold_s)
         return result
 
