@@ -5,7 +5,8 @@ A simulator (`sim-vehicle`, the PX4 bridge) runs either from a person's terminal
 (`python -m <package> --config FILE.json`, started by `flight.sim_launcher`). Either way:
 
 - SIGINT, SIGTERM and SIGHUP set a stop event: the simulator closes its ports and its
-  own children (the render process, PX4) and exits 0;
+  own children (the render process, PX4) and exits 0 (a stop that hangs for 30 s prints
+  every thread's stack and ends the process hard);
 - as a child (`watch_parent=True`) it also stops when its parent process is gone,
   however the parent died (SIGKILL included): the parent is polled every 0.5 s, and a
   stop that hangs for 10 s ends the process hard;
@@ -16,6 +17,7 @@ A simulator (`sim-vehicle`, the PX4 bridge) runs either from a person's terminal
 
 from __future__ import annotations
 
+import faulthandler
 import json
 import logging
 import os
@@ -35,19 +37,49 @@ log = logging.getLogger(__name__)
 
 PARENT_POLL_S = 0.5
 STOP_GRACE_S = 10.0
+SIGNAL_STOP_GRACE_S = 30.0
+"""A stop asked by a signal may take longer than one on the parent's death: it closes the autopilot (PX4's
+own grace is 5 s, then its kill) as well as the simulator."""
 
 
 def stop_on_signals(name: str) -> threading.Event:
-    """An event that SIGINT, SIGTERM and SIGHUP set (main thread only)."""
+    """An event that SIGINT, SIGTERM and SIGHUP set (call from the main thread).
+
+    No Python code runs for the signal in the main thread: a handler there runs between two of its
+    bytecodes, possibly while the main thread holds `stop`'s own lock (inside `stop.wait()`, which the
+    serving loops call), and `Event.set()` would then wait for that lock forever (it is not
+    re-entrant: `sim-vehicle` once hung so on a SIGTERM). Python's C-level handler writes the signal's
+    number to a pipe (`signal.set_wakeup_fd`), and a thread reading it sets the event. That thread
+    also bounds the stop: if the process still lives `SIGNAL_STOP_GRACE_S` later, every thread's
+    stack goes to stderr and the process ends hard (exit 3)."""
     stop = threading.Event()
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)
+    for signum in _STOP_SIGNALS:
+        signal.signal(signum, _noted)
+    signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
 
-    def on_signal(signum: int, _frame: object) -> None:
-        log.info("%s: %s received, stopping", name, signal.Signals(signum).name)
+    def stopping() -> None:
+        while not (signums := [s for s in os.read(read_fd, 64) if s in _STOP_SIGNALS]):
+            pass
+        signal_name = signal.Signals(signums[0]).name
+        log.info("%s: %s received, stopping", name, signal_name)
         stop.set()
+        time.sleep(SIGNAL_STOP_GRACE_S)
+        log.error("%s: still stopping %.0f s after %s: ending hard", name, SIGNAL_STOP_GRACE_S, signal_name)
+        faulthandler.dump_traceback(all_threads=True)
+        os._exit(3)
 
-    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        signal.signal(signum, on_signal)
+    threading.Thread(target=stopping, name="signal-stop", daemon=True).start()
     return stop
+
+
+_STOP_SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM, signal.SIGHUP})
+
+
+def _noted(_signum: int, _frame: object) -> None:
+    """The Python-level handler of a stop signal: nothing (the wakeup pipe carries it, see
+    `stop_on_signals`); it only has to be there for the C-level handler to write to the pipe."""
 
 
 def watch_parent(stop: threading.Event, name: str) -> None:
