@@ -76,6 +76,11 @@ def _get(url: str) -> tuple[int, bytes]:
         return exc.code, exc.read()
 
 
+def _wrong(token: str) -> str:
+    """The token with its last character changed (to one it is not: a random token may end in any)."""
+    return token[:-1] + ("y" if token[-1] != "y" else "z")
+
+
 def _ws(url: str, **kwargs: Any) -> ClientConnection:
     return connect(url.replace("http://", "ws://") + "ws", open_timeout=5, **kwargs)
 
@@ -100,7 +105,8 @@ def test_the_page_and_its_files_need_the_token(served) -> None:
     assert status == 200 and b"dronectl console" in body
     assert _get(url + "static/console.js")[0] == 200
     base = f"http://127.0.0.1:{server.port}"
-    for refused in ("/", "/c/", f"/c/{token}", f"/c/{token[:-1]}x/", f"/c/{token[:-1]}x/static/console.js",
+    wrong = _wrong(token)
+    for refused in ("/", "/c/", f"/c/{token}", f"/c/{wrong}/", f"/c/{wrong}/static/console.js",
                     "/static/console.js", f"/c/x/{token}/"):  # fmt: skip
         assert _get(base + refused)[0] == 403, refused
 
@@ -108,7 +114,7 @@ def test_the_page_and_its_files_need_the_token(served) -> None:
 def test_a_websocket_without_the_token_or_from_another_site_is_refused(served) -> None:
     url, token, operator, server = served
     with pytest.raises(InvalidStatus) as refused:
-        connect(f"ws://127.0.0.1:{server.port}/c/{token[:-1]}x/ws", open_timeout=5)
+        connect(f"ws://127.0.0.1:{server.port}/c/{_wrong(token)}/ws", open_timeout=5)
     assert refused.value.response.status_code == 403
     with pytest.raises(InvalidStatus):
         _ws(url, origin="http://evil.example")  # type: ignore[arg-type]
