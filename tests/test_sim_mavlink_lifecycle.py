@@ -27,8 +27,12 @@ PORT, HTTP = 14940, 18940
 pytestmark = pytest.mark.slow
 
 
-def _mission_file(tmp_path: Path, fixed_ports: bool = False) -> Path:
-    text = MISSION.read_text() + (f"ports: {{mavlink_udp: {PORT}, http: {HTTP}}}\n" if fixed_ports else "")
+def _mission_file(tmp_path: Path, fixed_ports: bool = False, fast: bool = True) -> Path:
+    # `fast`: as fast as the lockstep allows, where what a test checks (a stop, a kill, a report) does
+    # not hang on the vehicle's clock. A fault at a simulated time needs real time: running free
+    # before offboard, the vehicle would pass it before the mission had even opened the camera.
+    text = MISSION.read_text() + ("sim_speed: max\n" if fast else "")
+    text += f"ports: {{mavlink_udp: {PORT}, http: {HTTP}}}\n" if fixed_ports else ""
     path = tmp_path / "mission.yaml"
     path.write_text(text)
     return path
@@ -94,7 +98,7 @@ def test_a_leftover_vehicle_on_the_ports_is_never_flown(tmp_path: Path) -> None:
 
 def _faulty_mission(tmp_path: Path, faults: str) -> Path:
     path = tmp_path / "faulty.yaml"
-    path.write_text(_mission_file(tmp_path).read_text() + f"faults: {faults}\n")
+    path.write_text(_mission_file(tmp_path, fast=False).read_text() + f"faults: {faults}\n")
     return path
 
 
