@@ -210,13 +210,13 @@ def test_limited_is_logged_only_when_a_command_is_limited(caplog: pytest.LogCapt
         assert "limited to" in caplog.text
 
 
-def test_sigterm_and_sighup_stop_like_ctrl_c_and_a_second_signal_does_not_abort_the_stop() -> None:
+def test_ctrl_c_sigterm_and_sighup_stop_alike_and_a_second_signal_does_not_abort_the_stop() -> None:
     import os
     import signal
 
     from flight.signals import StopRequested, stop_signals_as_interrupt
 
-    for signum in (signal.SIGTERM, signal.SIGHUP):
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         landed = []
         with pytest.raises(StopRequested) as info, stop_signals_as_interrupt():
             try:
@@ -228,6 +228,7 @@ def test_sigterm_and_sighup_stop_like_ctrl_c_and_a_second_signal_does_not_abort_
                 landed.append(True)
         assert isinstance(info.value, KeyboardInterrupt)
         assert info.value.signal_name == signal.Signals(signum).name
+        assert info.value.exit_code == 128 + signum  # the shell's 130, 143, 129
         assert landed == [True]
     assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL  # handlers restored after the block
 
