@@ -22,11 +22,24 @@ it (seeds 200–259 and 300–339, 1.5–3 m away): 95 right (gauge 36/37, valve
 switch box 26/29); the first version (no handle cut-out, no shadow) read 84 % of
 switch boxes.
 
-Pure numpy; about a millisecond per box.
+A switch box's frame is 1–2 px wide, and a detector's box is off by about as much (4–6 % of its
+side): the band then holds the door or the wall, read as grey or black (40 of 214 fully visible
+switch boxes wrong on `data/pval` around the detector's boxes, 5 of 216 around the truth's). So a
+switch box's box is first snapped to its door (`_door_box`): the connected region of pixels like
+the door's body that holds the box's middle, its bounding box grown by `_FRAME_PX`, each side
+kept from the detector where the door's region meets the end of what was looked at (the image's
+edge, or a wall as light as the door). On the validation sets (`data/pval`, `data/pval_twins`: the
+shipped detector's boxes, switch boxes fully in view) that reads 202/214 and 112/120 right, against
+174/214 and 101/120 without it; cut by the frame's edge, 37/38 and 17/17 against 32/38 and 14/17.
+Gauges and valves read as before. (The door's tolerance, 35–45, changes none of these by more than
+one; a frame of 0.5 px trades 5 on `data/pval` for 4 on the twins.)
+
+Numpy and one OpenCV labelling; about a millisecond per box.
 """
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from drone_inspect_core.vocabulary import shipped_vocabulary
@@ -49,6 +62,10 @@ _CANDIDATE_DISTANCE = 35.0  # a trim candidate differs from every background pix
 _MAX_BACKGROUND = 128  # background pixels compared against, evenly subsampled
 _MAX_BAND = 192  # band pixels looked at, evenly subsampled
 _MAX_CANDIDATES = 64  # trim candidates scored, evenly subsampled (a large box's band has hundreds)
+_DOOR_LIKE = 40.0  # a pixel within this of the door body's median colour is door (8-bit RGB)
+_DOOR_SEARCH = 1.3  # the door is looked for within this of the box's centre, in half-axes
+_DOOR_SIZE = (0.6, 1.3)  # a door region outside these fractions of the box's sides is not the door
+_FRAME_PX = 1.0  # the frame around the door, as the box's band expects it
 
 
 def read_attribute(
@@ -60,6 +77,8 @@ def read_attribute(
     `kind` picks the band (a switch box's frame, else a ring); None when the box is
     degenerate or has too few pixels around it to compare with.
     """
+    if kind == "switchbox":
+        bbox_px = _door_box(image, bbox_px) or bbox_px
     band, outside, inside = _regions(image, bbox_px, kind)
     if len(band) < 4 or len(outside) < 4:
         return None
@@ -82,6 +101,47 @@ def read_attribute(
     gaps = candidates[None, :, None, :] - blends[:, None, :, :]  # (C, N, M, 3)
     residual = np.linalg.norm(gaps, axis=3).min(axis=2)  # (C, N)
     return _NAMES[int(np.argmin(np.median(residual, axis=1)))]
+
+
+def _door_box(
+    image: np.ndarray, bbox_px: tuple[float, float, float, float]
+) -> tuple[float, float, float, float] | None:
+    """A switch box's box snapped to its door (see the module docstring), or None when no region like
+    the door's body fits the box (a door as dark as its icons, a box that is not a switch box)."""
+    height, width = image.shape[:2]
+    u0, v0, u1, v1 = bbox_px
+    cu, cv = (u0 + u1) / 2.0, (v0 + v1) / 2.0
+    ru, rv = (u1 - u0) / 2.0, (v1 - v0) / 2.0
+    if not (ru >= 2.0 and rv >= 2.0):
+        return None
+    left, top = max(0, int(cu - _DOOR_SEARCH * ru)), max(0, int(cv - _DOOR_SEARCH * rv))
+    right = min(width, int(np.ceil(cu + _DOOR_SEARCH * ru)))
+    bottom = min(height, int(np.ceil(cv + _DOOR_SEARCH * rv)))
+    mu0, mu1 = max(left, int(cu - 0.5 * ru)), min(right, int(cu + 0.5 * ru) + 1)
+    mv0, mv1 = max(top, int(cv - 0.5 * rv)), min(bottom, int(cv + 0.5 * rv) + 1)
+    if right - left < 3 or bottom - top < 3 or mu1 <= mu0 or mv1 <= mv0:
+        return None
+    region = image[top:bottom, left:right].astype(np.float32)
+    body = np.median(image[mv0:mv1, mu0:mu1].reshape(-1, 3).astype(np.float32), axis=0)
+    door = (np.linalg.norm(region - body, axis=2) < _DOOR_LIKE).astype(np.uint8)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(door, connectivity=4)
+    middle = labels[mv0 - top : mv1 - top, mu0 - left : mu1 - left]
+    votes = np.bincount(middle.ravel(), minlength=count)
+    votes[0] = 0  # not door
+    label = int(np.argmax(votes))
+    if votes[label] == 0:
+        return None
+    x, y, w, h = (int(v) for v in stats[label, :4])
+    if not (_DOOR_SIZE[0] * 2 * ru <= w <= _DOOR_SIZE[1] * 2 * ru):
+        return None
+    if not (_DOOR_SIZE[0] * 2 * rv <= h <= _DOOR_SIZE[1] * 2 * rv):
+        return None
+    # A side where the door's region reaches the end of the search was not found: the detector's stays.
+    found_u0 = left + x - _FRAME_PX if x > 0 else u0
+    found_v0 = top + y - _FRAME_PX if y > 0 else v0
+    found_u1 = left + x + w + _FRAME_PX if x + w < right - left else u1
+    found_v1 = top + y + h + _FRAME_PX if y + h < bottom - top else v1
+    return (float(found_u0), float(found_v0), float(found_u1), float(found_v1))
 
 
 def _regions(

@@ -96,6 +96,31 @@ def test_read_attribute_on_synthetic_trim() -> None:
     assert read_attribute(np.zeros((8, 8, 3), np.uint8), (3.0, 3.0, 3.5, 3.5), "gauge") is None
 
 
+def test_a_switch_box_read_around_a_misplaced_box_is_snapped_to_its_door_first(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A 1 px frame, a box 2-3 px off it (as a detector's often is): the frame is found from the door.
+    Without the snap the band holds the wall and the door, and most colours read as something else."""
+    import perception.attributes as attributes
+    from perception.attributes import _door_box
+
+    boxes = []
+    for name, rgb in ((c.name, c.rgb) for c in shipped_vocabulary().colours.values()):
+        box = np.empty((80, 80, 3), np.uint8)
+        box[:] = (128, 118, 110)  # a wall
+        box[20:61, 24:55] = rgb  # the frame: rows 20 and 60, columns 24 and 54
+        box[21:60, 25:54] = (236, 236, 232)  # the door
+        box[28:31, 30:36] = (20, 20, 20)  # a label on it
+        off = (27.0, 17.0, 58.0, 58.0)  # 3 px right, 3 px high, 2 px short at the bottom
+        assert _door_box(box, off) == pytest.approx((24.0, 20.0, 55.0, 61.0))  # the door grown by 1 px
+        assert read_attribute(box, off, "switchbox") == name
+        plain = np.full((80, 80, 3), 128, np.uint8)  # nothing like a door: the box is kept
+        assert _door_box(plain, off) is None
+        boxes.append((box, off, name))
+    monkeypatch.setattr(attributes, "_door_box", lambda image, bbox: None)
+    assert sum(read_attribute(box, off, "switchbox") != name for box, off, name in boxes) >= 2
+
+
 def test_decoding_keeps_each_local_peak_once_and_drops_another_kind_on_the_same_object() -> None:
     """A hand-made head output: a gauge peak with a weaker valve peak 1 cell away, a switch box elsewhere."""
     detector = ImageDetector(CentreNet(DetectorConfig()), backend="torch")  # the torch network is stubbed
