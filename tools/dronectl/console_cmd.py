@@ -24,51 +24,18 @@ import time
 from pathlib import Path
 
 from controller.missions.report import claim_report_dir
-from controller.missions.schema import MissionFileError, load_mission
-from controller.planning.planners import PLANNER_NAMES
+from controller.missions.schema import MissionFileError
 from drone_inspect_core.files import OutputDirError, claim_fresh_dir
-from dronectl.ardupilot_options import add_ardupilot_options, apply_ardupilot_options
-from dronectl.fly_cmd import DEFAULT_MISSION, _overrides, _px4_options, summary_lines
-from dronectl.options import (
-    CommandParser,
-    add_signing_key,
-    at_least,
-    positive_float,
-    say_error,
-    seed_value,
-    signing_key,
-)
+from dronectl.fly_cmd import summary_lines
+from dronectl.mission_options import add_mission_options, mission_from_args
+from dronectl.options import CommandParser, at_least, positive_float, say_error, signing_key
 
 PROG = "dronectl console"
 
 
 def _parser() -> CommandParser:
     parser = CommandParser(prog=PROG, description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--mission", type=Path, default=DEFAULT_MISSION, help="mission YAML (default: %(default)s)"
-    )
-    parser.add_argument(
-        "--vehicle", help="override the vehicle: sim, sim-mavlink, px4-sitl, ardupilot-sitl or a MAVLink URL"
-    )
-    parser.add_argument("--camera", help="override the camera: sim or a stream URL")
-    parser.add_argument("--planner", choices=PLANNER_NAMES, help="override the mission's planner")
-    parser.add_argument("--checkpoint", help="latent planner checkpoint folder (default: the shipped one)")
-    parser.add_argument("--seed", type=seed_value, help="override the scene seed")
-    parser.add_argument("--epsilon-px", type=float, help="override ε, pixels")
-    parser.add_argument("--max-steps", type=at_least(1), help="override the step budget per instruction")
-    parser.add_argument("--timeout-s", type=float, help="override the time budget per instruction, seconds")
-    parser.add_argument(
-        "--target-kind", help="simulated scenes: the named target's kind (gauge, valve, switchbox, ...)"
-    )
-    parser.add_argument(
-        "--targets", type=int, help="simulated scenes: targets on the wall, the named one included (1..4)"
-    )
-    parser.set_defaults(instruction=None)  # the console's instructions come from the page, one by one
-    parser.add_argument("--sim-speed", help="sim-mavlink: simulated seconds per wall second (default 1)")
-    parser.add_argument("--px4", type=Path, help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
-    parser.add_argument("--px4-speed", help="px4-sitl: simulated seconds per wall second, or 'max'")
-    add_ardupilot_options(parser)
-    add_signing_key(parser)
+    add_mission_options(parser, instructions=False)  # the instructions come from the page, one by one
     parser.add_argument(
         "--out",
         type=Path,
@@ -109,10 +76,7 @@ def main(argv: list[str]) -> int:
     from controller.console.run import ConsoleOptions, open_console  # uvicorn, torch: after the options
 
     try:
-        mission = load_mission(args.mission, _overrides(args))
-        if args.seed is not None:
-            mission = mission.with_seed(args.seed)
-        mission = apply_ardupilot_options(_px4_options(mission, args), args)
+        mission = mission_from_args(args)
         key = signing_key(args)
         bad_host = _check_host(args.host)
         if bad_host is not None:

@@ -28,7 +28,6 @@ bad mission file or option.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import sys
 import time
@@ -36,58 +35,10 @@ from pathlib import Path
 from typing import Any
 
 from controller.missions.results import MissionResult
-from controller.missions.schema import (
-    PX4_SITL,
-    Mission,
-    MissionFileError,
-    Px4Spec,
-    load_mission,
-)
-from controller.planning.planners import PLANNER_NAMES
+from controller.missions.schema import MissionFileError
 from drone_inspect_core.files import OutputDirError, claim_fresh_dir
-from dronectl.ardupilot_options import add_ardupilot_options, apply_ardupilot_options
-from dronectl.options import CommandParser, add_signing_key, at_least, say_error, seed_value, signing_key
-
-DEFAULT_MISSION = Path(__file__).resolve().parents[2] / "missions" / "default.yaml"
-
-
-MISSION_FIELDS = (
-    "planner", "checkpoint", "epsilon_px", "max_steps", "timeout_s", "vehicle", "camera", "sim_speed",
-    "target_kind", "targets",
-)  # fmt: skip
-"""The mission fields an option of the same name changes (`Mission` validates them)."""
-
-
-def _overrides(args: argparse.Namespace) -> dict[str, Any]:
-    out: dict[str, Any] = {
-        key: getattr(args, key) for key in MISSION_FIELDS if getattr(args, key) is not None
-    }
-    if args.instruction:  # the command line's instructions replace the file's, one or a list
-        out.update(instruction=None, instructions=list(args.instruction))
-    return out
-
-
-def _px4_options(mission: Mission, args: argparse.Namespace) -> Mission:
-    """Apply --px4 / --px4-speed (px4-sitl only), resolving the PX4 folder now: a bad one is named at once."""
-    if mission.vehicle != PX4_SITL and args.px4 is None and args.px4_speed is None:
-        return mission
-    from sim_world.px4_bridge.px4_process import find_px4_dir  # the simulator only when it is flown
-
-    if args.px4 is None and args.px4_speed is None:
-        if mission.vehicle == PX4_SITL:
-            find_px4_dir(mission.px4.dir)
-        return mission
-    if mission.vehicle != PX4_SITL:
-        raise ValueError(
-            f"--px4 and --px4-speed go with --vehicle px4-sitl (the vehicle is {mission.vehicle!r})"
-        )
-    update: dict[str, Any] = {}
-    if args.px4 is not None or mission.px4.dir is not None:
-        update["dir"] = str(find_px4_dir(args.px4 if args.px4 is not None else mission.px4.dir))
-    if args.px4_speed is not None:
-        update["speed"] = args.px4_speed if args.px4_speed == "max" else float(args.px4_speed)
-    px4 = Px4Spec.model_validate({**mission.px4.model_dump(), **update})
-    return mission.model_copy(update={"px4": px4})
+from dronectl.mission_options import add_mission_options, mission_from_args
+from dronectl.options import CommandParser, say_error, signing_key
 
 
 def summary_lines(result: MissionResult) -> list[str]:
@@ -138,43 +89,7 @@ def _instruction_line(entry: dict[str, Any]) -> str:
 
 def main(argv: list[str]) -> int:
     parser = CommandParser(prog="dronectl fly", description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--mission", type=Path, default=DEFAULT_MISSION, help="mission YAML (default: %(default)s)"
-    )
-    parser.add_argument("--planner", choices=PLANNER_NAMES, help="override the mission's planner")
-    parser.add_argument("--checkpoint", help="latent planner checkpoint folder (default: the shipped one)")
-    parser.add_argument("--seed", type=seed_value, help="override the scene seed (and a random start's seed)")
-    parser.add_argument("--epsilon-px", type=float, help="override ε, pixels")
-    parser.add_argument("--max-steps", type=at_least(1), help="override the step budget (per instruction)")
-    parser.add_argument("--timeout-s", type=float, help="override the time budget (per instruction), seconds")
-    parser.add_argument(
-        "--instruction",
-        action="append",
-        metavar="TEXT",
-        help="what to centre, e.g. 'centre the red valve'; repeat it to centre several in one flight "
-        "(replaces the mission's instructions)",
-    )
-    parser.add_argument(
-        "--target-kind", help="simulated scenes: the named target's kind (gauge, valve, switchbox, ...)"
-    )
-    parser.add_argument(
-        "--targets", type=int, help="simulated scenes: targets on the wall, the named one included (1..4)"
-    )
-    parser.add_argument(
-        "--vehicle", help="override the vehicle: sim, sim-mavlink, px4-sitl, ardupilot-sitl or a MAVLink URL"
-    )
-    parser.add_argument("--px4", type=Path, help="px4-sitl: PX4 SITL build folder (default: $PX4_SITL_DIR)")
-    parser.add_argument(
-        "--px4-speed",
-        help="px4-sitl: simulated seconds per wall second, or 'max' (default: the mission's, 1)",
-    )
-    add_ardupilot_options(parser)
-    parser.add_argument(
-        "--sim-speed",
-        help="sim-mavlink: the sim-vehicle's simulated seconds per wall second, or 'max' (default: the "
-        "mission's, 1)",
-    )
-    parser.add_argument("--camera", help="override the camera: sim or a stream URL")
+    add_mission_options(parser, instructions=True)
     parser.add_argument(
         "--out",
         type=Path,
@@ -187,17 +102,13 @@ def main(argv: list[str]) -> int:
         metavar="FILE.rrd",
         help="also record the flight for the Rerun viewer (a new file; needs the [rerun] extra)",
     )
-    add_signing_key(parser)
     parser.add_argument("-v", "--verbose", action="store_true", help="log every module's progress")
     args = parser.parse_args(argv)
     if not args.verbose:
         logging.getLogger().setLevel(logging.WARNING)
         logging.getLogger("flight.mavsdk.vehicle").setLevel(logging.INFO)  # what a wait is waiting for
     try:
-        mission = load_mission(args.mission, _overrides(args))
-        if args.seed is not None:
-            mission = mission.with_seed(args.seed)
-        mission = apply_ardupilot_options(_px4_options(mission, args), args)
+        mission = mission_from_args(args)
         key = signing_key(args)
         if key is not None and not mission.is_real:
             raise ValueError(
