@@ -154,13 +154,14 @@ LAST_LAND_UNCONFIRMED = (
 
 def safe_stop(vehicle: Vehicle) -> str:
     """Best effort: hold, leave offboard, land if in the air, disarm; failures are logged, not raised.
+    A vehicle that is on the ground and disarmed already gets nothing.
 
     A vehicle that no longer answers still gets one LAND (`Vehicle.send_land`: telemetry may be gone
     while commands still get through), and nothing else; the return value says what came of it ("" when
     the vehicle answered).
     """
     try:
-        vehicle.telemetry()
+        now = vehicle.telemetry()
     except LinkLostError as exc:
         log.error("safe stop: the vehicle is not answering (%s); sending a last LAND", exc)
         try:
@@ -173,19 +174,28 @@ def safe_stop(vehicle: Vehicle) -> str:
         return said
     steps = (("hold", vehicle.hold), ("stop offboard", vehicle.stop_offboard))
     for name, step in steps:
+        if not now.armed and not now.in_air:
+            # Down and disarmed already (its own failsafe landed it, say, after our uplink died): a hold
+            # or a mode change would change nothing, and on a dead uplink each waits out its retries (6 s).
+            log.warning("safe stop: the vehicle is on the ground and disarmed: nothing more to stop")
+            return ""
         try:
             step()
         except FlightError as exc:
             log.warning("safe stop: %s failed: %s", name, exc)
+        try:
+            now = vehicle.telemetry()
+        except FlightError:
+            break  # said below, where the landing needs it
     try:
-        in_air = vehicle.telemetry().in_air
+        now = vehicle.telemetry()
     except LinkLostError:  # lost while holding: the last word is a LAND
         return safe_stop(vehicle)
     except FlightError as exc:
         log.error("safe stop: no telemetry (%s); cannot land the vehicle from here", exc)
         return ""
     for name, step in (("land", vehicle.land), ("disarm", vehicle.disarm)):
-        if name == "land" and not in_air:
+        if (name == "land" and not now.in_air) or (name == "disarm" and not now.armed and not now.in_air):
             continue
         try:
             step()

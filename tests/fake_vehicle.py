@@ -60,6 +60,7 @@ class FakeVehicle(Vehicle):
         vehicle = cls(lag_s=0.0, fail_on_move=fail_on_move)
         vehicle.position = [0.0, east_m, -up_m]
         vehicle.mode, vehicle.setpoint, vehicle._takeoff_climbs = FlightMode.OFFBOARD, VelocityBody(), False
+        vehicle.armed = vehicle.in_air = True  # hovering
         return vehicle
 
     @property

@@ -165,6 +165,13 @@ def test_safe_stop_on_the_ground_does_not_land_again() -> None:
     assert fake.calls[-1] == "disarm"
 
 
+def test_safe_stop_of_a_vehicle_down_and_disarmed_already_sends_nothing() -> None:
+    """Its own failsafe landed it (after our uplink died, say): nothing to hold, leave or land."""
+    fake = FakeVehicle()
+    assert safe_stop(fake) == ""
+    assert fake.calls == []
+
+
 def test_safe_stop_keeps_going_when_a_step_fails() -> None:
     class StubbornHold(FakeVehicle):
         def hold(self) -> None:
