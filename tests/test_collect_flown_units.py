@@ -4,8 +4,10 @@ to a pose with bounded speed and settling, and what a lost camera does (hold, wa
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from fake_vehicle import FakeVehicle
 
@@ -97,3 +99,43 @@ def test_a_lost_camera_lands_when_the_operator_chose_land(tmp_path: Path) -> Non
     goal = _goal_at(vehicle.telemetry())
     on_camera_loss(vehicle, _config(tmp_path, "land"), goal)
     assert "land" in vehicle.calls and not vehicle.telemetry().in_air
+
+
+class StampedCamera(Camera):
+    """Frames stamped as they arrive, one every `period_s` (a test stand-in for a live stream)."""
+
+    def __init__(self, period_s: float = 0.02) -> None:
+        self.period_s, self.number = period_s, 0
+
+    def read(self, timeout_s: float | None = None) -> Frame:
+        time.sleep(self.period_s)
+        self.number += 1
+        image = np.zeros((8, 8, 3), np.uint8)
+        return Frame(image=image, timestamp_s=time.monotonic(), frame_number=self.number)
+
+    def close(self) -> None:
+        pass
+
+
+def test_off_real_time_a_capture_takes_a_frame_that_arrived_a_lag_after_settling(tmp_path: Path) -> None:
+    """At "max" a frame arriving at once can show the drone before it stopped (on the vehicle's clock):
+    the capture waits for one that arrived `frame_lag_s` later; at real time, and on a real vehicle, not."""
+    from dataclasses import replace
+
+    from controller.collection.config import SimOptions
+    from drone_inspect_core.sim_speed import OFF_REAL_TIME_FRESH_FRAME_S
+
+    fast = _config(tmp_path, "land")
+    assert fast.simulator_speed == "max" and fast.frame_lag_s == OFF_REAL_TIME_FRESH_FRAME_S
+    real_time = replace(fast, sim=SimOptions(sim_speed=1.0))
+    assert real_time.frame_lag_s == 0.0
+    real = replace(
+        fast, vehicle="udpin://0.0.0.0:14540", camera="http://127.0.0.1:8080/stream.mjpg", goal="here"
+    )
+    assert real.simulator_speed is None and real.frame_lag_s == 0.0
+    settled = time.monotonic()
+    frame = read_or_wait(_hovering(), StampedCamera(), fast)
+    assert frame.timestamp_s >= settled + OFF_REAL_TIME_FRESH_FRAME_S
+    settled = time.monotonic()
+    frame = read_or_wait(_hovering(), StampedCamera(), real_time)
+    assert settled <= frame.timestamp_s < settled + OFF_REAL_TIME_FRESH_FRAME_S

@@ -186,11 +186,10 @@ def capture_one(
 
 
 def read_or_wait(vehicle: Vehicle, camera: Camera, config: FlownCollectConfig) -> Any:
-    """A frame that arrived once settled; a camera that sends nothing is waited for `loss_wait_s`
-    (holding), then `CameraLostError`."""
-    settled_at = time.monotonic()
+    """A frame that arrived once settled (`FlownCollectConfig.frame_lag_s` after);
+    a camera that sends nothing is waited for `loss_wait_s` (holding), then `CameraLostError`."""
     try:
-        return fresh_frame(camera, settled_at)
+        return fresh_frame(camera, time.monotonic() + config.frame_lag_s)
     except CameraError as exc:
         log.warning("camera: %s; holding and waiting %.0f s for it", exc, config.loss_wait_s)
         vehicle.hold()

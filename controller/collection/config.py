@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from controller.missions.vehicles import SIM, SIMULATED_VEHICLES
-from drone_inspect_core.sim_speed import parse_sim_speed
+from controller.missions.vehicles import ARDUPILOT_SITL, PX4_SITL, SIM, SIM_MAVLINK, SIMULATED_VEHICLES
+from drone_inspect_core.sim_speed import OFF_REAL_TIME_FRESH_FRAME_S, SimSpeed, off_real_time, parse_sim_speed
 
 GOAL_HERE, GOAL_SCENE = "here", "scene"
 SIMULATED = tuple(v for v in SIMULATED_VEHICLES if v != SIM)
@@ -140,6 +140,23 @@ class FlownCollectConfig:
     seed: int = 0
     sim: SimOptions = field(default_factory=SimOptions)
     progress: bool = True
+
+    @property
+    def simulator_speed(self) -> SimSpeed | None:
+        """The speed of the simulator this collection starts (None: a real vehicle)."""
+        speeds = {
+            SIM_MAVLINK: self.sim.sim_speed,
+            PX4_SITL: self.sim.px4_speed,
+            ARDUPILOT_SITL: self.sim.ardupilot_speed,
+        }
+        speed = speeds.get(self.vehicle)
+        return None if speed is None else parse_sim_speed(str(speed))
+
+    @property
+    def frame_lag_s(self) -> float:
+        """How long after the drone settles a frame must arrive to show it settled: 0 at real time, else
+        `OFF_REAL_TIME_FRESH_FRAME_S` (the camera's wall-time lag is more of the vehicle's clock)."""
+        return OFF_REAL_TIME_FRESH_FRAME_S if off_real_time(self.simulator_speed) else 0.0
 
     def __post_init__(self) -> None:
         if not self.goal:

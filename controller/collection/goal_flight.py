@@ -136,7 +136,7 @@ def record_goal(
     if not settled:
         log.warning("not settled at the goal within %.0f s: recording it as it is", config.settling.timeout_s)
     pose, range_m = sample_goal_pose(vehicle)
-    frame = fresh_frame(camera, time.monotonic())
+    frame = fresh_frame(camera, time.monotonic() + config.frame_lag_s)
     if (frame.width, frame.height) != (model.width, model.height):
         raise GoalError(
             f"the camera sends {frame.width}x{frame.height} px images, the camera model says "
@@ -166,7 +166,7 @@ def record_goal(
                     f"read the target's box off it and fly from it: --goal {path} --goal-box x,y,w,h"
                 ) from None
             log.info("no %s detected in the goal frame: trying the next frame", config.kind)
-            frame = fresh_frame(camera, time.monotonic())
+            frame = fresh_frame(camera, time.monotonic() + config.frame_lag_s)
     goal = GoalRecord(
         pose, box, depth, source, box_source, config.kind, (frame.width, frame.height), frame.image
     )
@@ -203,12 +203,17 @@ def centre_by_image(
 
 
 def verify_goal(
-    vehicle: Vehicle, camera: Camera, model: CameraModel, goal: GoalRecord, agree_px: float
+    vehicle: Vehicle,
+    camera: Camera,
+    model: CameraModel,
+    goal: GoalRecord,
+    agree_px: float,
+    lag_s: float = 0.0,
 ) -> tuple[float, float]:
     """At the goal pose of an earlier flight: the target must be where the goal image had it. Returns the
     tracked offset (`GoalError` when it is not found, or too far from the goal image's)."""
     assert goal.image is not None
-    frame = fresh_frame(camera, time.monotonic())
+    frame = fresh_frame(camera, time.monotonic() + lag_s)
     tracker = TemplateTracker(goal.image, goal.box_px)
     du0, dv0 = goal.offset_px
     width, height = model.width, model.height
@@ -249,7 +254,7 @@ def centre_goal(
     def seen_here() -> tuple[PoseNed, Frame, tuple[float, float, float, float], float, float]:
         wait_settled(vehicle, config.settling)
         pose, _ = sample_goal_pose(vehicle)
-        frame = fresh_frame(camera, time.monotonic())
+        frame = fresh_frame(camera, time.monotonic() + config.frame_lag_s)
         found = tracker.track(frame.image)
         if found is None:
             raise GoalError("at the goal pose the camera does not see the goal image's target")

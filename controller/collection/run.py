@@ -224,7 +224,7 @@ def _reach_goal(
     if goal is not None:  # --goal FILE, or --resume
         climb_to(vehicle, goal.pose.down_m, {})
         fly_to(vehicle, goal.pose, control, config.settling)
-        seen = verify_goal(vehicle, camera, model, goal, agree_px)
+        seen = verify_goal(vehicle, camera, model, goal, agree_px, config.frame_lag_s)
         if config.resume:  # the plan was made around this goal: it stays
             return goal, seen
         return centre_goal(vehicle, camera, model, goal, config, control), None

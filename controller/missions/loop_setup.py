@@ -12,11 +12,8 @@ from controller.missions.vehicles import ARDUPILOT_SITL, PX4_SITL, SIM_MAVLINK
 from controller.planning.grounding import TargetQuery, understand
 from controller.planning.loop_records import CentringConfig
 from drone_inspect_core.centring import default_epsilon_px
+from drone_inspect_core.sim_speed import OFF_REAL_TIME_FRESH_FRAME_S, SimSpeed, off_real_time
 from drone_inspect_core.vocabulary import Vocabulary, parse_kinds
-
-FAST_SIM_FRESH_FRAME_S = 0.1
-"""A simulator off real time: a frame must arrive this long after an observation begins (render,
-JPEG and HTTP take a few tens of ms of wall time, which at ×8 are a few tenths of a simulated second)."""
 
 
 def epsilon_for(mission: Mission, kit: FlightKit) -> float:
@@ -54,16 +51,18 @@ def loop_config(
         max_steps=mission.max_steps,
         timeout_s=mission.timeout_s,
         stop_margin_px=mission.stop_margin_px,
-        **({"fresh_frame_s": FAST_SIM_FRESH_FRAME_S} if off_real_time(mission) else {}),
+        **({"fresh_frame_s": OFF_REAL_TIME_FRESH_FRAME_S} if off_real_time(simulator_speed(mission)) else {}),
     )
 
 
-def off_real_time(mission: Mission) -> bool:
-    """Whether the mission's simulator runs off real time (sim-mavlink's `sim_speed`, a SITL's `speed`):
-    its camera's frames then lag the vehicle by more than at ×1, on the vehicle's clock."""
+def simulator_speed(mission: Mission) -> SimSpeed | None:
+    """The speed of the mission's simulator behind a MAVLink link (sim-mavlink's `sim_speed`, a SITL's
+    `speed`); None for the in-process simulation and a real vehicle. Off real time
+    (`drone_inspect_core.sim_speed.off_real_time`), its camera's frames lag the vehicle by more than at ×1,
+    on the vehicle's clock."""
     speeds = {
         SIM_MAVLINK: mission.sim_speed,
         PX4_SITL: mission.px4.speed,
         ARDUPILOT_SITL: mission.ardupilot.speed,
     }
-    return speeds.get(mission.vehicle, 1.0) != 1.0
+    return speeds.get(mission.vehicle)
