@@ -21,10 +21,9 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from controller.missions.kits.base import FlightKit, LoadedModels, OpenedVehicle
+from controller.missions.kits.base import FlightKit, LoadedModels
 from controller.missions.kits.simulated import (
     SIM_HFOV_DEG,
-    SimTruth,
     SimulatedVehicle,
     new_system_id,
     relay_for,
@@ -174,8 +173,5 @@ def _start(mission: Mission, out_dir: Path, key: str, stack: ExitStack) -> WarmS
 def _simulated(mission: Mission, out_dir: Path, simulator: WarmSimulator) -> SimulatedVehicle:
     """The mission's view of the (fresh or reset) ArduPilot and its world."""
     config = _config(mission, out_dir, simulator)
-    info = {**simulator.info, "warm_missions": simulator.missions}
-    opened = OpenedVehicle(simulator.vehicle, simulator.camera, info=info, tlog=simulator.relay)
-    truth = SimTruth(simulator.sim.ready["truth_url"])
     assert config.start_offset is not None
-    return SimulatedVehicle(opened, truth, config.scene, mission.scene.seed, config.start_offset)
+    return simulator.simulated_vehicle(config.scene, mission.scene.seed, config.start_offset)

@@ -24,10 +24,9 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from controller.missions.kits.base import FlightKit, LoadedModels, OpenedVehicle
+from controller.missions.kits.base import FlightKit, LoadedModels
 from controller.missions.kits.simulated import (
     SIM_HFOV_DEG,
-    SimTruth,
     SimulatedVehicle,
     new_system_id,
     relay_for,
@@ -195,17 +194,5 @@ def _simulated(
 ) -> SimulatedVehicle:
     """The mission's view of the (fresh or reset) PX4 and its world."""
     config = _config(mission, out_dir, simulator, limits)
-    opened = OpenedVehicle(
-        simulator.vehicle,
-        simulator.camera,
-        info={**simulator.info, "warm_missions": simulator.missions},
-        tlog=simulator.relay,
-    )
     assert config.start_offset is not None
-    return SimulatedVehicle(
-        opened,
-        SimTruth(simulator.sim.ready["truth_url"]),
-        config.scene,
-        mission.scene.seed,
-        config.start_offset,
-    )
+    return simulator.simulated_vehicle(config.scene, mission.scene.seed, config.start_offset)

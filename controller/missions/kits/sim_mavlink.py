@@ -22,10 +22,9 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import asdict
 from pathlib import Path
 
-from controller.missions.kits.base import FlightKit, LoadedModels, OpenedVehicle
+from controller.missions.kits.base import FlightKit, LoadedModels
 from controller.missions.kits.simulated import (
     SIM_HFOV_DEG,
-    SimTruth,
     SimulatedVehicle,
     new_system_id,
     relay_for,
@@ -175,7 +174,4 @@ def _start(
 
 def _simulated(mission: Mission, simulator: WarmSimulator, start: StartPose) -> SimulatedVehicle:
     """The mission's view of the (fresh or reset) simulator."""
-    info = {**simulator.info, "warm_missions": simulator.missions}
-    opened = OpenedVehicle(simulator.vehicle, simulator.camera, info=info, tlog=simulator.relay)
-    truth = SimTruth(simulator.sim.ready["truth_url"])
-    return SimulatedVehicle(opened, truth, scene_config_for(mission), mission.scene.seed, start)
+    return simulator.simulated_vehicle(scene_config_for(mission), mission.scene.seed, start)

@@ -26,10 +26,11 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
-from controller.missions.kits.base import TLOG_NAME
-from controller.missions.kits.simulated import vehicle_limits_for
+from controller.missions.kits.base import TLOG_NAME, OpenedVehicle
+from controller.missions.kits.simulated import SimTruth, SimulatedVehicle, vehicle_limits_for
 from controller.missions.schema import ARDUPILOT_SITL, PX4_SITL, SIM_MAVLINK, Mission
 from drone_inspect_core.config_files import to_json
+from drone_inspect_core.world_options import StartPose
 from flight.errors import FlightError
 from flight.relay import MavlinkRelay
 from flight.safety import SafetyLimits
@@ -37,6 +38,7 @@ from flight.sim_launcher import SimulatorProcess, SimulatorStartError
 from flight.types import Telemetry
 from flight.vehicle import Vehicle
 from perception.stream_camera import StreamCamera
+from sim_world.scene.config import SceneConfig
 
 log = logging.getLogger(__name__)
 
@@ -73,6 +75,13 @@ class WarmSimulator:
     @property
     def alive(self) -> bool:
         return self.sim.alive
+
+    def simulated_vehicle(self, scene: SceneConfig, seed: int, start: StartPose) -> SimulatedVehicle:
+        """A mission's view of this simulator (fresh, or reset to the mission's world): the vehicle and
+        camera as a real one's, the simulator's truth for judging, and the world it was built from."""
+        info = {**self.info, "warm_missions": self.missions}
+        opened = OpenedVehicle(self.vehicle, self.camera, info=info, tlog=self.relay)
+        return SimulatedVehicle(opened, SimTruth(self.sim.ready["truth_url"]), scene, seed, start)
 
     def reset(self, config: Any, out_dir: Path, log_name: str) -> dict[str, Any]:
         """The simulator reset to `config`'s world, the .tlog and the simulator's log in `out_dir`, and the
