@@ -121,7 +121,9 @@ def test_a_camera_that_dies_mid_flight_ends_the_mission_landed(tmp_path: Path) -
     from controller.missions.runner import run_mission
     from controller.missions.schema import load_mission
 
-    mission = load_mission(_faulty_mission(tmp_path, "{camera: {dies_at_s: 5.0}}"))
+    path = _faulty_mission(tmp_path, "{camera: {dies_at_s: 5.0}}")
+    path.write_text(path.read_text() + "loop: {frame_timeout_s: 2.0}\n")  # the loop's wait for a frame
+    mission = load_mission(path)
     result = run_mission(mission, tmp_path / "run", media=False)
     assert not result.passed and "camera" in (result.error or "")
     log = mavutil.mavlink_connection(str(tmp_path / "run" / "flight.tlog"))
