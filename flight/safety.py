@@ -172,8 +172,12 @@ def safe_stop(vehicle: Vehicle) -> str:
         said = LAST_LAND_SENT if acknowledged else LAST_LAND_UNCONFIRMED
         log.error("safe stop: %s", said)
         return said
-    steps = (("hold", vehicle.hold), ("stop offboard", vehicle.stop_offboard))
-    for name, step in steps:
+    for name, step in (("hold", vehicle.hold), ("stop offboard", vehicle.stop_offboard)):
+        if name != "hold":
+            try:
+                now = vehicle.telemetry()
+            except FlightError:
+                break  # said below, where the landing needs it
         if not now.armed and not now.in_air:
             # Down and disarmed already (its own failsafe landed it, say, after our uplink died): a hold
             # or a mode change would change nothing, and on a dead uplink each waits out its retries (6 s).
@@ -183,10 +187,6 @@ def safe_stop(vehicle: Vehicle) -> str:
             step()
         except FlightError as exc:
             log.warning("safe stop: %s failed: %s", name, exc)
-        try:
-            now = vehicle.telemetry()
-        except FlightError:
-            break  # said below, where the landing needs it
     try:
         now = vehicle.telemetry()
     except LinkLostError:  # lost while holding: the last word is a LAND

@@ -138,7 +138,10 @@ class MavlinkTestClient:
         p = [*params, *[0.0] * (7 - len(params))]
         t0 = time.monotonic()
         self.send(mavlink.MAVLink_command_long_message(target, 1, command, 0, *p))
-        acked = lambda m: m.command == command  # noqa: E731
+
+        def acked(m: Msg) -> bool:
+            return m.command == command
+
         try:
             self.wait_for("COMMAND_ACK", timeout_s / WAIT_SLACK, acked, after=t0)
         except TimeoutError:

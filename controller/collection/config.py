@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Literal
 
 from controller.missions.vehicles import ARDUPILOT_SITL, PX4_SITL, SIM, SIM_MAVLINK, SIMULATED_VEHICLES
-from drone_inspect_core.sim_speed import OFF_REAL_TIME_FRESH_FRAME_S, SimSpeed, off_real_time, parse_sim_speed
+from drone_inspect_core.sim_speed import OFF_REAL_TIME_FRESH_FRAME_S, off_real_time, parse_sim_speed
 
 GOAL_HERE, GOAL_SCENE = "here", "scene"
 SIMULATED = tuple(v for v in SIMULATED_VEHICLES if v != SIM)
@@ -142,15 +142,14 @@ class FlownCollectConfig:
     progress: bool = True
 
     @property
-    def simulator_speed(self) -> SimSpeed | None:
-        """The speed of the simulator this collection starts (None: a real vehicle)."""
+    def simulator_speed(self) -> float | str | None:
+        """The speed of the simulator this collection starts, as given (None: a real vehicle)."""
         speeds = {
             SIM_MAVLINK: self.sim.sim_speed,
             PX4_SITL: self.sim.px4_speed,
             ARDUPILOT_SITL: self.sim.ardupilot_speed,
         }
-        speed = speeds.get(self.vehicle)
-        return None if speed is None else parse_sim_speed(str(speed))
+        return speeds.get(self.vehicle)
 
     @property
     def frame_lag_s(self) -> float:
