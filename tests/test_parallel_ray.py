@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from controller.benchmarks.missions import BenchmarkConfig, run_benchmark
-from drone_inspect_core.parallel import LOCAL, gather, task_executor
+from drone_inspect_core.parallel import gather, task_executor
 
 pytest.importorskip("ray", reason="the [distributed] extra (ray) is not installed")
 
@@ -67,15 +67,18 @@ def _ps() -> list[tuple[int, int, str]]:
 
 
 @pytest.mark.slow
-def test_benchmark_on_a_local_ray_gives_the_plain_numbers_and_a_dead_worker_is_named(tmp_path: Path) -> None:
+def test_benchmark_on_a_ray_cluster_gives_the_plain_numbers_and_a_dead_worker_is_named(
+    tmp_path: Path, ray_address: str
+) -> None:
+    # The module's head (a private local head is what `--ray local` starts: the SIGKILL test's).
     config = BenchmarkConfig(n=3, seed=5, planners=("classic", "latent"))
     plain = run_benchmark(config)
-    on_ray = run_benchmark(replace(config, parallel=2, ray=LOCAL), report_dir=tmp_path / "reports")
+    on_ray = run_benchmark(replace(config, parallel=2, ray=ray_address), report_dir=tmp_path / "reports")
     assert _rows(on_ray) == _rows(plain)
     assert len({m["name"] for m in on_ray["missions"]}) == 6
     assert not on_ray["limits"]["reports_incomplete"]
 
-    with task_executor(2, ray=LOCAL) as pool:
+    with task_executor(2, ray=ray_address) as pool:
         # built-ins: Ray's workers cannot import a test module
         futures = [pool.submit(pow, 3, 2), pool.submit(os._exit, 7), pool.submit(pow, 4, 2)]
         results = gather(futures, lambda i: f"task {i} (seed {100 + i})")
