@@ -136,8 +136,15 @@ class Vocabulary:
         return "#{:02x}{:02x}{:02x}".format(*self.colours[name].rgb)
 
     def with_kinds(self, kinds: Mapping[str, TargetKind]) -> Vocabulary:
-        """This vocabulary and `kinds`; a kind of an existing name keeps its face and gains the words."""
-        merged = dict(self.kinds)
+        """This vocabulary and `kinds`; a kind of an existing name keeps its face and gains the words.
+        A word the added kinds claim leaves another kind's `other` words (a site's "box" or "clock" is
+        its own, not the shipped switch box's or gauge's); a trained or held-out word stays, and a
+        claim on it is a `VocabularyError`."""
+        claimed = {phrase: name for name, kind in kinds.items() for phrase in kind.words}
+        merged = {
+            name: replace(kind, other=tuple(p for p in kind.other if claimed.get(p, name) == name))
+            for name, kind in self.kinds.items()
+        }
         for name, kind in kinds.items():
             if name in merged:
                 old = merged[name]

@@ -76,10 +76,10 @@ def test_as_flown_the_planner_hears_its_trained_words_and_failures_are_named() -
 
 
 def test_a_phrase_of_known_words_that_names_no_target_is_refused() -> None:
-    # "pressure" belongs to "pressure gauge" and "indicator" to "indicator dial", but neither names a
+    # "junction" belongs to "junction box" and "pressure" to "pressure gauge", but neither names a
     # target: flying to whatever is in view would be a guess.
-    with pytest.raises(InstructionRefused, match="'pressure indicator'"):
-        understand("Bring the pressure indicator into the middle of the shot.")
+    with pytest.raises(InstructionRefused, match="'junction pressure'"):
+        understand("Bring the junction pressure into the middle of the shot.")
     assert understand("centre the red dial gauge") == TargetQuery("gauge", "red")
 
 

@@ -15,7 +15,11 @@ Matching rules (tested in tests/test_grounding.py):
   mention; "switch box" is a switch box, never a "box" of something else);
 - the kind is the first kind phrase in the text; its attribute is the colour word
   nearest to that phrase (before it or after it); with no kind phrase, the first colour
-  word, if any, still narrows the choice ("centre the red one").
+  word, if any, still narrows the choice ("centre the red one");
+- a colour is a declared colour word, or a colour name of the survey table that reads as a trim
+  colour (`drone_inspect_core.colour_words`: "charcoal", "navy blue") where it stands as a colour
+  (in a noun phrase that goes on to a target's name or a trim's part); a name that reads as no trim
+  colour ("the green valve") is refused by `understand`.
 
 An instruction that names no known kind gives `kind=None`: the strongest detection of
 any kind is the target (today's single-target behaviour).
@@ -30,6 +34,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
+from drone_inspect_core.colour_words import TRIM_WORDS, colour_words
 from drone_inspect_core.vocabulary import Vocabulary, normalise_phrase, shipped_vocabulary
 from perception.types import Detection
 
@@ -81,10 +86,38 @@ Patterns = tuple[re.Pattern[str], dict[str, str], re.Pattern[str], dict[str, str
 
 @functools.lru_cache(maxsize=32)
 def _patterns(vocabulary: Vocabulary) -> Patterns:
-    """The kind and colour patterns of a vocabulary (built once per vocabulary)."""
+    """The kind and colour patterns of a vocabulary (built once per vocabulary). A colour's phrases are
+    its declared words and the colour names that read as it (`drone_inspect_core.colour_words`)."""
     kinds, kind_of = _phrase_pattern({k.name: k.words for k in vocabulary.kinds.values()})
-    colours, colour_of = _phrase_pattern({c.name: c.words for c in vocabulary.colours.values()})
+    named = colour_words(vocabulary).named
+    colours, colour_of = _phrase_pattern(
+        {
+            c.name: (*c.words, *(phrase for phrase, colour in named.items() if colour == c.name))
+            for c in vocabulary.colours.values()
+        }
+    )
     return kinds, kind_of, colours, colour_of
+
+
+@functools.lru_cache(maxsize=32)
+def _no_trim_pattern(vocabulary: Vocabulary) -> re.Pattern[str] | None:
+    """Colour names that no trim colour is ("green", "orange")."""
+    unmatched = colour_words(vocabulary).unmatched
+    if not unmatched:
+        return None
+    return _phrase_pattern({"": tuple(unmatched)})[0]
+
+
+def _colour_no_trim_is(words: str, vocabulary: Vocabulary) -> str | None:
+    """The first colour name in `words` that no trim is, standing in a colour's place ("the green
+    valve", "the orange-trimmed one"); None when there is none."""
+    pattern = _no_trim_pattern(vocabulary)
+    if pattern is None:
+        return None
+    for match in pattern.finditer(words):
+        if _in_colour_place(words, match.end(), vocabulary):
+            return match.group()
+    return None
 
 
 def normalise(text: str) -> str:
@@ -95,10 +128,11 @@ def normalise(text: str) -> str:
 def parse_instruction(text: str, vocabulary: Vocabulary | None = None) -> TargetQuery:
     """The target the instruction names (see the module docstring for the rules), in the words of
     `vocabulary` (default: the shipped one)."""
-    kind_pattern, kind_of, colour_pattern, colour_of = _patterns(vocabulary or shipped_vocabulary())
+    vocabulary = vocabulary or shipped_vocabulary()
+    kind_pattern, kind_of, colour_pattern, colour_of = _patterns(vocabulary)
     words = normalise(text)
     kind_match = kind_pattern.search(words)
-    colours = list(colour_pattern.finditer(words))
+    colours = [c for c in colour_pattern.finditer(words) if _stands_as_colour(c, words, vocabulary)]
     if kind_match is None:
         return TargetQuery(None, colour_of[colours[0].group()] if colours else None)
     start, end = kind_match.span()
@@ -108,6 +142,34 @@ def parse_instruction(text: str, vocabulary: Vocabulary | None = None) -> Target
 
     attribute = colour_of[min(colours, key=gap).group()] if colours else None
     return TargetQuery(kind_of[kind_match.group()], attribute)
+
+
+def _stands_as_colour(match: re.Match[str], words: str, vocabulary: Vocabulary) -> bool:
+    """Whether a colour phrase found in `words` is one: a declared colour word, or a name ending in one,
+    always; another colour name of the table only in a colour's place (`_in_colour_place`)."""
+    phrase = match.group()
+    if phrase not in colour_words(vocabulary).named or _is_declared_colour(phrase.split()[-1], vocabulary):
+        return True
+    return _in_colour_place(words, match.end(), vocabulary)
+
+
+def _in_colour_place(words: str, end: int, vocabulary: Vocabulary) -> bool:
+    """Whether the noun phrase that goes on after `end` (the words up to the next ordinary word) holds a
+    kind phrase or starts with a trim word: "mustard| butterfly valve", "charcoal| trimmed shutoff",
+    "mustard| bezel", "sky blue| one"; not "the sky|" (`colour_words` module docstring)."""
+    following = words[end:].split()
+    if following and following[0] in TRIM_WORDS:
+        return True
+    run = []
+    for word in following:
+        if word in vocabulary.instruction_words or word in DETERMINERS:
+            break
+        run.append(word)
+    return bool(run) and _patterns(vocabulary)[0].search(" ".join(run)) is not None
+
+
+def _is_declared_colour(word: str, vocabulary: Vocabulary) -> bool:
+    return any(word in colour.words for colour in vocabulary.colours.values())
 
 
 DETERMINERS = frozenset({"the", "a", "an", "that", "this", "my", "our", "your", "its"})
@@ -126,7 +188,10 @@ def unknown_nouns(text: str, vocabulary: Vocabulary | None = None) -> list[str]:
     gauge", "indicator" to "indicator dial"; neither names a target alone)."""
     vocabulary = vocabulary or shipped_vocabulary()
     kind_pattern = _patterns(vocabulary)[0]
-    colour_words = {w for c in vocabulary.colours.values() for phrase in c.words for w in phrase.split()}
+    table = colour_words(vocabulary)
+    declared = (p for c in vocabulary.colours.values() for p in c.words)
+    colour_phrases = (*declared, *table.named, *table.unmatched)
+    colour_word_set = {w for phrase in colour_phrases for w in phrase.split()}
     words = normalise(text).split()
     found: list[str] = []
     i = 0
@@ -135,7 +200,7 @@ def unknown_nouns(text: str, vocabulary: Vocabulary | None = None) -> list[str]:
             i += 1
             continue
         j = i + 1
-        while j < len(words) and words[j] in colour_words:
+        while j < len(words) and words[j] in colour_word_set:
             j += 1  # colour words between the determiner and the noun
         run: list[str] = []
         while j < len(words) and words[j] not in vocabulary.instruction_words and words[j] not in DETERMINERS:
@@ -150,10 +215,18 @@ def unknown_nouns(text: str, vocabulary: Vocabulary | None = None) -> list[str]:
 def understand(text: str, vocabulary: Vocabulary | None = None) -> TargetQuery:
     """What the instruction asks for, or `InstructionRefused` before anything flies: an instruction that
     names no known kind but puts an unknown noun where a target's name would stand ("centre the flux
-    capacitor") is refused with the word and the closest known names; "centre it" (no noun) is not."""
+    capacitor") is refused with the word and the closest known names; "centre it" (no noun) is not.
+    One that asks for a colour no trim is ("the green valve", "the orange one") is refused with the
+    trim colours, rather than flown to whichever valve is strongest."""
     vocabulary = vocabulary or shipped_vocabulary()
     if not normalise(text):
         raise InstructionRefused("the instruction is empty: say what to centre, e.g. 'centre the gauge'")
+    asked = _colour_no_trim_is(normalise(text), vocabulary)
+    if asked is not None:
+        raise InstructionRefused(
+            f"{text.strip()!r}: no target's trim is {asked!r}; the trim colours are "
+            f"{', '.join(vocabulary.colour_names)}"
+        )
     query = parse_instruction(text, vocabulary)
     if query.kind is not None:
         return query
