@@ -108,3 +108,30 @@ def test_not_in_view_regression_mission_ends_target_not_found_without_a_move(tmp
     result = run_mission(load_mission(REGRESSION / "not_in_view.yaml"), tmp_path / "report", media=False)
     assert result.passed, result.failures
     assert result.outcome == "target_not_found" and result.moves == 0 and not result.wrong_target
+
+
+@pytest.mark.timeout(180)
+def test_a_benchmark_in_an_operators_words_flies_what_the_loop_understands_and_counts_what_it_refuses(
+    tmp_path: Path,
+) -> None:
+    words = tmp_path / "words.yaml"
+    words.write_text(
+        "templates: ['Frame up the {target}.', 'Get the {target} in the middle, please.']\n"
+        "words: {gauge: [manometer], valve: [flux capacitor], switchbox: [breaker panel]}\n"
+        "colours: {black: [charcoal], grey: [silver], red: [crimson], blue: [navy], yellow: [mustard]}\n"
+    )
+    config = BenchmarkConfig.of({"targets": 2}, n=6, seed=3, planners=("oracle",), instructions=str(words))
+    missions = benchmark_missions(config, "oracle", frozenset())
+    refused = [m for m in missions if "refused" in m.tags]
+    flown = [m for m in missions if "refused" not in m.tags]
+    assert refused and flown  # "flux capacitor" names no kind: those valve missions are refused
+    assert all("flux capacitor" in m.description for m in refused)
+    assert all(m.instructions[0].instruction.startswith(("Frame up the", "Get the")) for m in flown)
+    summary = run_benchmark(config, report_dir=tmp_path / "reports")
+    oracle = summary["planners"]["oracle"]
+    assert oracle["refused"] == len(refused) and oracle["successes"] == len(flown)
+    assert not summary["limits"]["reports_incomplete"]  # a refused mission still leaves its report
+    assert "refused before take-off (counted as failed): oracle" in format_summary(summary)
+    with pytest.raises(ValueError, match="'valve'"):  # a file without words for a kind is named up front
+        words.write_text("templates: ['Frame up the {target}.']\nwords: {gauge: [manometer]}\n")
+        BenchmarkConfig.of({"targets": 2}, n=1, instructions=str(words))

@@ -10,10 +10,12 @@ distance and yaw.
 Several targets (`targets` N > 1, `twins`): every scene holds N targets; the instruction
 names the named one with a phrase of the latent planner's `instructions` corpus
 (held-out by default: words its training never paired), its trim colour included where
-the kind alone would not say which. `absent` (a fraction): those missions' instructions
-name a target the scene does not hold (a kind not on the wall, else a colour no target of
-that kind has) and expect `target_not_found`. One target, no phrases, nothing absent:
-today's missions exactly ("center the <kind>", resolved by the kit).
+the kind alone would not say which; or, `instructions` an operator-words file
+(`controller.evaluation.operator_words`: its templates, words and colour forms), in the operator's
+own words, which the loop must understand as it flies (a refused or misread instruction fails).
+`absent` (a fraction): those missions' instructions name a target the scene does not hold (a kind
+not on the wall, else a colour no target of that kind has) and expect `target_not_found`. One
+target, no phrases, nothing absent: today's missions exactly ("center the <kind>", resolved by the kit).
 
 Several instructions per flight (`instructions_per_flight` N > 1, with `targets` >= N): each flight
 names N of its scene's targets in turn, the named one first, then the others in the scene's order, each
@@ -33,7 +35,8 @@ from typing import Any
 
 import numpy as np
 
-from controller.missions.schema import Mission, parse_mission
+from controller.evaluation.operator_words import is_operator_words_file, load_operator_words
+from controller.missions.schema import Mission, MissionFileError, parse_mission
 from controller.missions.vehicles import SIMULATED_VEHICLES
 from controller.planning.grounding import TargetQuery
 from controller.planning.planners import PLANNER_NAMES
@@ -47,6 +50,9 @@ SEQUENCE_MAX_DISTANCE_M = 3.2
 """The farthest start of a sequence flight: a scene whose targets need more is skipped."""
 ABSENT_TAG = "absent"
 """The tag of a benchmark mission whose instruction names a target the scene does not hold."""
+REFUSED_TAG = "refused"
+"""The tag of a benchmark mission whose instruction (an operator-words file's) the loop refuses before
+take-off; it is not flown, counts as failed, and its `description` says why."""
 CORPORA = ("train", "heldout")
 
 
@@ -72,8 +78,9 @@ class BenchmarkConfig:
     """Fly every mission in this one scene of the family (a site: the one a collection was flown in), from
     starts drawn per mission; None: a scene seed of its own per mission (unseen scenes)."""
     instructions: str | None = None
-    """The corpus ("train" / "heldout") of the phrases naming the target; None: "heldout" with several
-    targets, twins or absent missions, else today's "center the <kind>"."""
+    """The corpus ("train" / "heldout") of the phrases naming the target, or an operator-words file
+    (.yaml); None: "heldout" with several targets, twins or absent missions, else today's "center the
+    <kind>"."""
     absent: float = 0.0
     """The fraction of missions whose instruction names a target the scene does not hold."""
     instructions_per_flight: int = 1
@@ -109,7 +116,12 @@ class BenchmarkConfig:
         if unknown or not self.planners:
             raise ValueError(f"planners must be among {', '.join(PLANNER_NAMES)}; got {self.planners}")
         if self.instructions is not None and self.instructions not in CORPORA:
-            raise ValueError(f"instructions must be one of {CORPORA}, got {self.instructions!r}")
+            if not is_operator_words_file(self.instructions):
+                raise ValueError(
+                    f"instructions must be one of {CORPORA} or an operator-words file (.yaml), "
+                    f"got {self.instructions!r}"
+                )
+            load_operator_words(self.instructions).check_covers(self.base.vocabulary.kind_names)
         if not 0.0 <= self.absent <= 1.0:
             raise ValueError(f"absent must be a fraction in [0, 1], got {self.absent:g}")
         if self.instructions_per_flight < 1:
@@ -189,16 +201,30 @@ def benchmark_missions(config: BenchmarkConfig, planner: str, skip_seeds: frozen
                 continue
             if sequence is None:  # the targets do not fit in one view from the farthest start
                 continue
-            mission = parse_mission({**data, **sequence})
+            mission = _with_words(data, sequence, config)
         elif config.corpus is not None:
             try:
-                mission = parse_mission(
-                    {**data, "instruction": instruction_for(mission, config.corpus, absent)}
+                mission = _with_words(
+                    data, {"instruction": instruction_for(mission, config.corpus, absent)}, config
                 )
             except SceneLayoutError:
                 continue
         missions.append(mission)
     return missions
+
+
+def _with_words(data: dict[str, Any], words: dict[str, Any], config: BenchmarkConfig) -> Mission:
+    """The mission with its drawn instruction(s); one the loop refuses (an operator's words it does not
+    understand, or twins named without a colour) is the mission without them, tagged `REFUSED_TAG`: the
+    phrases of the planner's own corpora are always understood, so a refusal of those is a bug and raises."""
+    try:
+        return parse_mission({**data, **words})
+    except MissionFileError as exc:
+        if config.corpus in CORPORA:
+            raise
+        return parse_mission(
+            {**data, "tags": [*data["tags"], REFUSED_TAG], "description": f"refused before take-off: {exc}"}
+        )
 
 
 def sequence_for(mission: Mission, config: BenchmarkConfig) -> dict[str, Any] | None:
@@ -219,7 +245,7 @@ def sequence_for(mission: Mission, config: BenchmarkConfig) -> dict[str, Any] | 
     for target in targets:
         repeats = mission.twins or kinds.count(target.kind) > 1
         name = TargetQuery(target.kind, colour_name(target.bezel_colour) if repeats else None)
-        phrases.append(describe(name, builtin_templates(corpus), corpus, words))
+        phrases.append(phrase(name, corpus, words))
     east = [t.east_m for t in targets]
     up = [t.height_m for t in targets]
     middle_east, middle_up = (max(east) + min(east)) / 2, (max(up) + min(up)) / 2
@@ -257,7 +283,15 @@ def instruction_for(mission: Mission, corpus: str, absent: bool) -> str:
         kind, attribute = targets[0]
         repeats = mission.twins or any(k == kind for k, _ in targets[1:])
         name = TargetQuery(kind, attribute if repeats else None)
-    return describe(name, builtin_templates(corpus), corpus, _draw(seed, 1))
+    return phrase(name, corpus, _draw(seed, 1))
+
+
+def phrase(name: TargetQuery, corpus: str, rng: np.random.Generator) -> str:
+    """An instruction naming `name`: a phrase of the corpus ("train" / "heldout"), or of an
+    operator-words file (`corpus` its path)."""
+    if corpus in CORPORA:
+        return describe(name, builtin_templates(corpus), corpus, rng)
+    return load_operator_words(corpus).instruction(name, rng)
 
 
 def _absent_name(

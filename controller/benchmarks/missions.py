@@ -29,12 +29,13 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from controller.benchmarks.mission_plan import ABSENT_TAG, BenchmarkConfig, benchmark_missions
+from controller.benchmarks.mission_plan import ABSENT_TAG, REFUSED_TAG, BenchmarkConfig, benchmark_missions
 from controller.missions.kits.base import LoadedModels
-from controller.missions.report import REPORT_JSON, claim_report_dir
+from controller.missions.report import REPORT_JSON, claim_report_dir, write_setup_failure
 from controller.missions.results import MissionResult
 from controller.missions.schema import ARDUPILOT_SITL, PX4_SITL, SIM_MAVLINK, Mission, parse_mission
 from controller.missions.suite import failed_to_start
+from controller.planning.grounding import InstructionRefused
 from drone_inspect_core.files import release_claim
 from drone_inspect_core.parallel import gather, task_executor
 from flight.safety import SafetyLimits
@@ -92,6 +93,9 @@ def _fly(
 ) -> MissionResult:
     from controller.missions.runner import run_mission
 
+    if REFUSED_TAG in mission.tags:  # the loop refuses its words before take-off: nothing flies
+        write_setup_failure(out_dir, mission, InstructionRefused(mission.description))
+        return failed_to_start(mission, mission.description, 0.0)
     models = models or _WORKER_MODELS.get("models")
     start = time.perf_counter()
     rerun_path = out_dir / MISSION_RRD if rerun else None
@@ -188,6 +192,7 @@ def summarise(config: BenchmarkConfig, results: list[MissionResult], wall_s: flo
             "second_choice_moves": sum(r.second_choice_moves for r in rows.values()),
             "missions_with_second_choice": sum(r.second_choice_moves > 0 for r in rows.values()),
             "wrong_target": sum(r.wrong_target for r in rows.values()),
+            "refused": sum(REFUSED_TAG in r.tags for r in every.values()),
             "not_in_view": {  # the planner said "not in view" of a detection of the named target
                 "present_missions": sum(r.not_in_view_reads > 0 for r in rows.values()),
                 "absent_missions": sum(r.not_in_view_reads > 0 for r in absent),
@@ -316,6 +321,12 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"instructions from the {corpus} phrases; "
             f"{100 * cfg.get('absent', 0.0):.0f}% name an absent target"
         )
+        refused = {p: s["refused"] for p, s in summary["planners"].items() if s.get("refused")}
+        if refused:
+            lines.append(
+                "refused before take-off (counted as failed): "
+                + ", ".join(f"{p} {n}" for p, n in refused.items())
+            )
     for key, who in (
         ("px4_ready_sim_s", "PX4 estimator ready (as seen by MAVSDK)"),
         ("ardupilot_ready_sim_s", "ArduPilot's EKF ready (as seen by the GUIDED backend)"),

@@ -193,9 +193,10 @@ def build_parser(prog: str = "dronectl benchmark-missions", description: str | N
     )
     parser.add_argument(
         "--instructions",
-        choices=("train", "heldout"),
-        help="the phrases naming the target (default: heldout with --targets/--twins/--absent, "
-        "else 'center the <kind>')",
+        metavar="train|heldout|FILE.yaml",
+        help="the phrases naming the target: the planner's train or heldout phrases, or an operator-words "
+        "file (docs/operator_words.yaml's format), flown as the loop understands them (default: heldout "
+        "with --targets/--twins/--absent, else 'center the <kind>')",
     )
     parser.add_argument(
         "--absent",
