@@ -21,7 +21,8 @@ A name made of words that also name a target or belong to an instruction's ordin
 out, so a colour name never changes how the rest of an instruction reads. And a table name counts
 as a colour only where it stands as one: in a noun phrase that goes on to a target's name ("the
 mustard butterfly valve", "the charcoal-trimmed shutoff") or a trim's part (`TRIM_WORDS`: "the
-mustard bezel", "the sky blue one"). "Centre the gauge against the sky" asks for no blue. A name
+mustard bezel", "the sky blue one"), or after a word that brings a colour (`COLOUR_LEADS`: "the valve
+painted mustard"). "Centre the gauge against the sky" asks for no blue. A name
 that ends in a declared colour word ("royal blue") is a colour wherever it stands, as that word is.
 """
 
@@ -47,6 +48,11 @@ TRIM_WORDS = frozenset(
 )  # fmt: skip
 """Words of a trim, its paint and "one": a table's colour name before them stands as a colour ("the
 valve with the mustard wheel", "the charcoal-trimmed valve")."""
+COLOUR_LEADS = frozenset(
+    {"painted", "coloured", "colored", "trimmed", "rimmed", "finished", "in", "is", "s", "thats", "whats"}
+)
+"""Words after which a table's colour name stands as a colour, after the noun ("the valve painted
+mustard", "the gauge in charcoal", "the one that's ebony": "that's" is "that s" once normalised)."""
 CHROMATIC = 30.0
 """CIELAB chroma from which a colour has a hue (the red, blue and yellow trims have 43-65; black and
 grey about 1; beige about 25, which reads as no trim)."""

@@ -58,13 +58,17 @@ def test_a_table_colour_counts_only_where_it_stands_as_a_colour() -> None:
     assert understand("Put the crosshair on the charcoal-trimmed shutoff.") == TargetQuery("valve", "black")
     assert understand("the royal blue-trimmed pressure dial") == TargetQuery("gauge", "blue")
     assert understand("valve, the blk one") == TargetQuery("valve", "black")
+    # After the noun, where a word brings the colour.
+    assert understand("Have a look at the shut-off valve painted mustard.") == TargetQuery("valve", "yellow")
+    assert understand("centre the steam gauge that's charcoal") == TargetQuery("gauge", "black")
+    assert understand("centre the gauge in the sky") == TargetQuery("gauge", None)
     # "sky" is a survey colour too, but here it is the sky: no colour asked for.
     assert understand("centre the gauge against the sky") == TargetQuery("gauge", None)
 
 
 @pytest.mark.parametrize(
     "text",
-    ["the green valve", "the orange one", "the purple gauge", "the pink-trimmed valve", "the GRN valve"],
+    ["the green valve", "the orange one", "the pink-trimmed valve", "the GRN tap", "the valve painted teal"],
 )
 def test_a_colour_no_trim_is_refused_with_the_trim_colours(text: str) -> None:
     trims = "trim colours are black, grey, red, blue, yellow"

@@ -34,7 +34,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
-from drone_inspect_core.colour_words import TRIM_WORDS, colour_words
+from drone_inspect_core.colour_words import COLOUR_LEADS, TRIM_WORDS, colour_words
 from drone_inspect_core.vocabulary import Vocabulary, normalise_phrase, shipped_vocabulary
 from perception.types import Detection
 
@@ -115,7 +115,7 @@ def _colour_no_trim_is(words: str, vocabulary: Vocabulary) -> str | None:
     if pattern is None:
         return None
     for match in pattern.finditer(words):
-        if _in_colour_place(words, match.end(), vocabulary):
+        if _in_colour_place(words, match.start(), match.end(), vocabulary):
             return match.group()
     return None
 
@@ -150,13 +150,18 @@ def _stands_as_colour(match: re.Match[str], words: str, vocabulary: Vocabulary) 
     phrase = match.group()
     if phrase not in colour_words(vocabulary).named or _is_declared_colour(phrase.split()[-1], vocabulary):
         return True
-    return _in_colour_place(words, match.end(), vocabulary)
+    return _in_colour_place(words, match.start(), match.end(), vocabulary)
 
 
-def _in_colour_place(words: str, end: int, vocabulary: Vocabulary) -> bool:
-    """Whether the noun phrase that goes on after `end` (the words up to the next ordinary word) holds a
-    kind phrase or starts with a trim word: "mustard| butterfly valve", "charcoal| trimmed shutoff",
-    "mustard| bezel", "sky blue| one"; not "the sky|" (`colour_words` module docstring)."""
+def _in_colour_place(words: str, start: int, end: int, vocabulary: Vocabulary) -> bool:
+    """Whether the words `start:end` stand where a colour does: after a word that says a colour comes
+    ("painted |mustard|", "that's |ebony|"), or before a noun phrase (the words up to the next ordinary
+    word) that holds a kind phrase or starts with a trim word: "|mustard| butterfly valve",
+    "|charcoal| trimmed shutoff", "|mustard| bezel", "|sky blue| one"; not "against the |sky|"
+    (`colour_words` module docstring)."""
+    before = words[:start].split()
+    if before and before[-1] in COLOUR_LEADS:  # after the noun: "the valve painted mustard"
+        return True
     following = words[end:].split()
     if following and following[0] in TRIM_WORDS:
         return True
