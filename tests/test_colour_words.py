@@ -62,6 +62,8 @@ def test_a_table_colour_counts_only_where_it_stands_as_a_colour() -> None:
     assert understand("Have a look at the shut-off valve painted mustard.") == TargetQuery("valve", "yellow")
     assert understand("centre the steam gauge that's charcoal") == TargetQuery("gauge", "black")
     assert understand("centre the gauge in the sky") == TargetQuery("gauge", None)
+    # "pale" alone is no trim's colour, but here it is part of one.
+    assert understand("Look at the main valve trimmed in pale yellow.") == TargetQuery("valve", "yellow")
     # "sky" is a survey colour too, but here it is the sky: no colour asked for.
     assert understand("centre the gauge against the sky") == TargetQuery("gauge", None)
 

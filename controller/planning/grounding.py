@@ -114,7 +114,10 @@ def _colour_no_trim_is(words: str, vocabulary: Vocabulary) -> str | None:
     pattern = _no_trim_pattern(vocabulary)
     if pattern is None:
         return None
+    trims = [m.span() for m in _patterns(vocabulary)[2].finditer(words)]
     for match in pattern.finditer(words):
+        if any(a <= match.start() and match.end() <= b for a, b in trims):
+            continue  # a part of a trim colour's name: "pale" in "pale yellow"
         if _in_colour_place(words, match.start(), match.end(), vocabulary):
             return match.group()
     return None
