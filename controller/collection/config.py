@@ -12,7 +12,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from controller.missions.vehicles import ARDUPILOT_SITL, PX4_SITL, SIM, SIM_MAVLINK, SIMULATED_VEHICLES
+from controller.missions.vehicles import (
+    SIM,
+    SIMULATED_VEHICLES,
+    simulator_speed_of,
+)
 from drone_inspect_core.sim_speed import OFF_REAL_TIME_FRESH_FRAME_S, off_real_time, parse_sim_speed
 
 GOAL_HERE, GOAL_SCENE = "here", "scene"
@@ -144,12 +148,8 @@ class FlownCollectConfig:
     @property
     def simulator_speed(self) -> float | str | None:
         """The speed of the simulator this collection starts, as given (None: a real vehicle)."""
-        speeds = {
-            SIM_MAVLINK: self.sim.sim_speed,
-            PX4_SITL: self.sim.px4_speed,
-            ARDUPILOT_SITL: self.sim.ardupilot_speed,
-        }
-        return speeds.get(self.vehicle)
+        sim = self.sim
+        return simulator_speed_of(self.vehicle, sim.sim_speed, sim.px4_speed, sim.ardupilot_speed)
 
     @property
     def frame_lag_s(self) -> float:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from controller.missions.kits.base import FlightKit
 from controller.missions.schema import Mission
-from controller.missions.vehicles import ARDUPILOT_SITL, PX4_SITL, SIM_MAVLINK
+from controller.missions.vehicles import simulator_speed_of
 from controller.planning.grounding import TargetQuery, understand
 from controller.planning.loop_records import CentringConfig
 from drone_inspect_core.centring import default_epsilon_px
@@ -60,9 +60,4 @@ def simulator_speed(mission: Mission) -> SimSpeed | None:
     `speed`); None for the in-process simulation and a real vehicle. Off real time
     (`drone_inspect_core.sim_speed.off_real_time`), its camera's frames lag the vehicle by more than at ×1,
     on the vehicle's clock."""
-    speeds = {
-        SIM_MAVLINK: mission.sim_speed,
-        PX4_SITL: mission.px4.speed,
-        ARDUPILOT_SITL: mission.ardupilot.speed,
-    }
-    return speeds.get(mission.vehicle)
+    return simulator_speed_of(mission.vehicle, mission.sim_speed, mission.px4.speed, mission.ardupilot.speed)
