@@ -28,6 +28,9 @@ def test_an_unknown_noun_is_refused_with_the_closest_known_words() -> None:
     with pytest.raises(InstructionRefused, match="no known target is called 'flux capacitor'") as error:
         understand("Centre the flux capacitor, please.")
     assert "closest known:" in str(error.value) and "\n" not in str(error.value)
+    assert "the targets are gauge, valve, switch box" in str(error.value)  # nothing near "flux capacitor"
+    with pytest.raises(InstructionRefused, match="the closest known: valve"):
+        understand("centre the vavle")  # a typo is offered its word
     with pytest.raises(InstructionRefused, match="empty"):
         understand("   ")
     # No noun where a target's name would stand: nothing to refuse, the loop centres what it sees.

@@ -180,6 +180,9 @@ def _is_declared_colour(word: str, vocabulary: Vocabulary) -> bool:
     return any(word in colour.words for colour in vocabulary.colours.values())
 
 
+SUGGEST_CUTOFF = 0.6
+"""How alike (difflib's ratio) a known phrase must be to an unknown word to be offered in its place
+("vavle": valve); with none that near, a refusal names the kinds instead."""
 DETERMINERS = frozenset({"the", "a", "an", "that", "this", "my", "our", "your", "its"})
 """Words after which a noun stands: "the flux capacitor", "that pump"."""
 
@@ -242,10 +245,12 @@ def understand(text: str, vocabulary: Vocabulary | None = None) -> TargetQuery:
     if unknown:
         phrases = sorted({p for kind in vocabulary.kinds.values() for p in kind.words})
         word = unknown[0]
-        close = difflib.get_close_matches(word, phrases, n=3, cutoff=0.0)
+        close = difflib.get_close_matches(word, phrases, n=3, cutoff=SUGGEST_CUTOFF)
+        nouns = ", ".join(vocabulary.noun(name) for name in vocabulary.kind_names)
+        known = ", ".join(close) if close else f"none near it; the targets are {nouns}"
         raise InstructionRefused(
             f"{text.strip()!r}: no known target is called {word!r}; the closest known: "
-            f"{', '.join(close)} (a site glossary can add words: `{word}: <kind>`)"
+            f"{known} (a site glossary can add words: `{word}: <kind>`)"
         )
     return query
 
