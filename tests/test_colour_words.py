@@ -66,6 +66,10 @@ def test_a_table_colour_counts_only_where_it_stands_as_a_colour() -> None:
     assert understand("Look at the main valve trimmed in pale yellow.") == TargetQuery("valve", "yellow")
     # "sky" is a survey colour too, but here it is the sky: no colour asked for.
     assert understand("centre the gauge against the sky") == TargetQuery("gauge", None)
+    # A survey name standing as a noun is an unknown target, refused as before the table.
+    for noun in ("stone", "sky", "rust"):
+        with pytest.raises(InstructionRefused, match=f"no known target is called '{noun}'"):
+            understand(f"centre the {noun}")
 
 
 @pytest.mark.parametrize(

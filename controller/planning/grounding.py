@@ -198,12 +198,15 @@ def unknown_nouns(text: str, vocabulary: Vocabulary | None = None) -> list[str]:
     parts of other phrases is unknown too ("the pressure indicator": "pressure" belongs to "pressure
     gauge", "indicator" to "indicator dial"; neither names a target alone)."""
     vocabulary = vocabulary or shipped_vocabulary()
-    kind_pattern = _patterns(vocabulary)[0]
-    table = colour_words(vocabulary)
-    declared = (p for c in vocabulary.colours.values() for p in c.words)
-    colour_phrases = (*declared, *table.named, *table.unmatched)
-    colour_word_set = {w for phrase in colour_phrases for w in phrase.split()}
-    words = normalise(text).split()
+    kind_pattern, _, colour_pattern, _ = _patterns(vocabulary)
+    text = normalise(text)
+    words = text.split()
+    colour_at = {  # the words of colours that stand as one ("the mustard one"; not "the sky")
+        text[: match.start()].count(" ") + k
+        for match in colour_pattern.finditer(text)
+        if _stands_as_colour(match, text, vocabulary)
+        for k in range(len(match.group().split()))
+    }
     found: list[str] = []
     i = 0
     while i < len(words):
@@ -211,7 +214,7 @@ def unknown_nouns(text: str, vocabulary: Vocabulary | None = None) -> list[str]:
             i += 1
             continue
         j = i + 1
-        while j < len(words) and words[j] in colour_word_set:
+        while j < len(words) and j in colour_at:
             j += 1  # colour words between the determiner and the noun
         run: list[str] = []
         while j < len(words) and words[j] not in vocabulary.instruction_words and words[j] not in DETERMINERS:
