@@ -37,7 +37,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from drone_inspect_core.vocabulary import Vocabulary, normalise_phrase
+from drone_inspect_core.vocabulary import Vocabulary, hex_to_rgb, normalise_phrase
 
 COLOUR_NAMES = Path(__file__).with_name("colour_names.csv")
 COLOUR_CODES = Path(__file__).with_name("colour_codes.csv")
@@ -84,17 +84,16 @@ def _lab(rgb: tuple[int, int, int]) -> np.ndarray:
     return cv2.cvtColor(pixel, cv2.COLOR_RGB2LAB)[0, 0].astype(np.float64)
 
 
+def _csv_rows(path: Path) -> list[dict[str, str]]:
+    """The rows of one of the colour tables beside this module (its `#` lines are comments)."""
+    with path.open(encoding="utf-8") as handle:
+        return list(csv.DictReader(line for line in handle if not line.startswith("#")))
+
+
 @functools.lru_cache(maxsize=1)
 def colour_table() -> tuple[tuple[str, tuple[int, int, int]], ...]:
     """(normalised name, sRGB) per row of `colour_names.csv`."""
-    rows = []
-    with COLOUR_NAMES.open(encoding="utf-8") as handle:
-        lines = (line for line in handle if not line.startswith("#"))
-        for row in csv.DictReader(lines):
-            text = row["rgb"].strip().lstrip("#")
-            rgb = (int(text[0:2], 16), int(text[2:4], 16), int(text[4:6], 16))
-            rows.append((normalise_phrase(row["name"]), rgb))
-    return tuple(rows)
+    return tuple((normalise_phrase(row["name"]), hex_to_rgb(row["rgb"])) for row in _csv_rows(COLOUR_NAMES))
 
 
 def _lch(rgb: tuple[int, int, int]) -> tuple[float, float, float]:
@@ -106,7 +105,7 @@ def nearest_trim(vocabulary: Vocabulary, rgb: tuple[int, int, int]) -> str | Non
     """The trim colour a colour of `rgb` reads as, None when none: by hue for a colourful one, by
     lightness for a greyish one (the constants above)."""
     lightness, chroma, hue = _lch(rgb)
-    refs = {name: _lch(colour.rgb) for name, colour in vocabulary.colours.items()}
+    refs = _trims_lch(vocabulary)
     if chroma >= CHROMATIC:
         near = [
             name
@@ -124,13 +123,17 @@ def nearest_trim(vocabulary: Vocabulary, rgb: tuple[int, int, int]) -> str | Non
     return greys[0][1]
 
 
+@functools.lru_cache(maxsize=32)
+def _trims_lch(vocabulary: Vocabulary) -> dict[str, tuple[float, float, float]]:
+    """Each trim colour's reference as (lightness, chroma, hue), once per vocabulary."""
+    return {name: _lch(colour.rgb) for name, colour in vocabulary.colours.items()}
+
+
 @functools.lru_cache(maxsize=1)
 def colour_codes() -> tuple[tuple[str, str], ...]:
     """(code, the colour name it stands for) per row of `colour_codes.csv`."""
-    with COLOUR_CODES.open(encoding="utf-8") as handle:
-        lines = (line for line in handle if not line.startswith("#"))
-        rows = csv.DictReader(lines)
-        return tuple((normalise_phrase(row["code"]), normalise_phrase(row["name"])) for row in rows)
+    rows = _csv_rows(COLOUR_CODES)
+    return tuple((normalise_phrase(row["code"]), normalise_phrase(row["name"])) for row in rows)
 
 
 @functools.lru_cache(maxsize=32)

@@ -29,13 +29,15 @@ at the image centre give or take the slack left, heading square to the wall.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from controller.evaluation.operator_words import is_operator_words_file, load_operator_words
+from controller.evaluation.operator_words import OperatorWords, is_operator_words_file, load_operator_words
 from controller.missions.schema import Mission, MissionFileError, parse_mission
 from controller.missions.vehicles import SIMULATED_VEHICLES
 from controller.planning.grounding import TargetQuery
@@ -121,7 +123,7 @@ class BenchmarkConfig:
                     f"instructions must be one of {CORPORA} or an operator-words file (.yaml), "
                     f"got {self.instructions!r}"
                 )
-            load_operator_words(self.instructions).check_covers(self.base.vocabulary.kind_names)
+            _operator_words(self.instructions).check_covers(self.base.vocabulary.kind_names)
         if not 0.0 <= self.absent <= 1.0:
             raise ValueError(f"absent must be a fraction in [0, 1], got {self.absent:g}")
         if self.instructions_per_flight < 1:
@@ -291,7 +293,22 @@ def phrase(name: TargetQuery, corpus: str, rng: np.random.Generator) -> str:
     operator-words file (`corpus` its path)."""
     if corpus in CORPORA:
         return describe(name, builtin_templates(corpus), corpus, rng)
-    return load_operator_words(corpus).instruction(name, rng)
+    return _operator_words(corpus).instruction(name, rng)
+
+
+def _operator_words(path: str) -> OperatorWords:
+    """An operator-words file, read once per version of it rather than once per mission."""
+    try:
+        stat = Path(path).stat()
+        version: tuple[int, int] | None = (stat.st_mtime_ns, stat.st_size)
+    except OSError:
+        version = None  # load_operator_words names the file and why it cannot be read
+    return _read_operator_words(path, version)
+
+
+@functools.lru_cache(maxsize=8)
+def _read_operator_words(path: str, version: tuple[int, int] | None) -> OperatorWords:
+    return load_operator_words(path)
 
 
 def _absent_name(

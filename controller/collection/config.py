@@ -12,11 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from controller.missions.vehicles import (
-    SIM,
-    SIMULATED_VEHICLES,
-    simulator_speed_of,
-)
+from controller.missions.vehicles import SIM, SIMULATED_VEHICLES, simulator_speed_of
 from drone_inspect_core.sim_speed import OFF_REAL_TIME_FRESH_FRAME_S, off_real_time, parse_sim_speed
 
 GOAL_HERE, GOAL_SCENE = "here", "scene"
