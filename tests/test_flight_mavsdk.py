@@ -35,7 +35,12 @@ SIM_PARAMS = (("COM_FAIL_ACT_T", 1.0),)
 
 
 def _config(port: int, link_timeout_s: float = 2.0) -> MavsdkConfig:
-    return MavsdkConfig(url=f"udpin://127.0.0.1:{port}", timeouts=TIMEOUTS, link_timeout_s=link_timeout_s)
+    return MavsdkConfig(
+        url=f"udpin://127.0.0.1:{port}",
+        timeouts=TIMEOUTS,
+        link_timeout_s=link_timeout_s,
+        parameter_save_guard_s=0.0,  # sim-vehicle saves no parameters
+    )
 
 
 @pytest.fixture(scope="module")

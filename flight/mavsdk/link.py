@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -39,6 +40,16 @@ time) is lost after this much silence (wall time): on a busy machine it is starv
 load 24-34), while one that died is still noticed within seconds."""
 
 
+PX4_PARAMETER_SAVE_GUARD_S = 2.5
+"""PX4 saves its parameters 0.3 s after a change, and at most once every 2 s (`param_autosave`), and it
+changes some itself when it arms (the flight's UUID) and disarms (the flight-time totals). A parameter
+set while a save ran failed the save's verify ("invalid BSON value"), and PX4 in lockstep then stalled
+for good (its simulator link silent: LINK_LOST): the next mission's takeoff altitude, set soon after the
+last mission's disarm on a warm PX4, stalled it in 2 of 3 runs of `dronectl benchmark-missions --n 2
+--vehicle px4-sitl` (8 missions each). 2.5 s after an arming change the save it caused is over, and the
+save of the new altitude comes 0.3 s after it is set (`PARAMETER_SAVE_S` waits that out)."""
+
+
 @dataclass(frozen=True)
 class MavsdkConfig:
     """How to reach the vehicle and how long to wait for it."""
@@ -60,6 +71,10 @@ class MavsdkConfig:
     vehicle's clock. MAVSDK re-sends it at 20 Hz of wall time, which a vehicle k times faster than real
     time sees at 20/k Hz (PX4 wants more than 2 Hz), and a lockstepped sim-vehicle advances only as
     setpoints arrive: a stream on its own clock keeps both as at ×1."""
+    parameter_save_guard_s: float = PX4_PARAMETER_SAVE_GUARD_S
+    """Seconds (of `clock`) after the vehicle last armed or disarmed before `prepare_takeoff` sets a
+    parameter: PX4 saves its parameters after either (see `PX4_PARAMETER_SAVE_GUARD_S`). 0: a vehicle that
+    saves no parameters (`dronectl sim-vehicle` keeps them in memory)."""
 
     def __post_init__(self) -> None:
         validate_connection_url(self.url)
@@ -71,6 +86,8 @@ class MavsdkConfig:
             raise ValueError("MavsdkConfig: link_timeout_s, arm_retry_period_s and poll_s must be > 0")
         if not self.offboard_stream_period_s > 0:
             raise ValueError("MavsdkConfig: offboard_stream_period_s must be > 0")
+        if not 0 <= self.parameter_save_guard_s < math.inf:
+            raise ValueError("MavsdkConfig: parameter_save_guard_s must be >= 0")
 
     @property
     def link_timeout(self) -> float:
@@ -134,6 +151,8 @@ class TelemetryCache:
         self.velocity: tuple[float, float, float] = _NAN3
         self.attitude: tuple[float, float, float] = _NAN3
         self.armed = False
+        self.armed_changed: tuple[float, float] = (-math.inf, -math.inf)
+        """(vehicle clock, wall clock) when `armed` last changed."""
         self.in_air = False
         self.mode = FlightMode.UNKNOWN
         self.battery_percent: float | None = None
@@ -182,7 +201,13 @@ class TelemetryCache:
 
         tel.subscribe_position_velocity_ned(store(pos_vel))
         tel.subscribe_attitude_euler(store(attitude))
-        tel.subscribe_armed(store(lambda d: setattr(self, "armed", bool(d))))
+
+        def armed(d: Any) -> None:
+            if bool(d) != self.armed:
+                self.armed_changed = (self.vehicle_time_s, time.monotonic())
+            self.armed = bool(d)
+
+        tel.subscribe_armed(store(armed))
         tel.subscribe_in_air(store(lambda d: setattr(self, "in_air", bool(d))))
         tel.subscribe_flight_mode(
             store(lambda d: setattr(self, "mode", FlightMode.__members__.get(d.name, FlightMode.OTHER)))
@@ -206,4 +231,3 @@ class TelemetryCache:
                 battery_remaining_percent=self.battery_percent,
                 forward_range_m=self.forward_range_m,
             )
-

@@ -60,10 +60,10 @@ OFFBOARD_START_ATTEMPTS = 3
 LAST_LAND_ACK_WAIT_S = 0.5
 PARAMETER_SAVE_S = 0.5
 """Vehicle-clock seconds left after setting the takeoff altitude, before arming, for PX4 to save its
-parameters (it does 0.3 s after a change). PX4 saves them again when it arms (the flight's UUID); a set
-arriving while a save ran failed its verify ("invalid BSON value"), and PX4 in lockstep then stalled for
-good (its simulator link silent: LINK_LOST), about one px4-sitl benchmark mission in 12 to 20 on a warm
-PX4 while the altitude was set after arming. So `prepare_takeoff` sets it before arming, and waits."""
+parameters (it does 0.3 s after a change). Set after arming, it raced the save PX4 makes when it arms
+(a stall: `link.PX4_PARAMETER_SAVE_GUARD_S`), about one px4-sitl benchmark mission in 12 to 20 on a warm
+PX4. So `prepare_takeoff` sets it before arming, at least `parameter_save_guard_s` after the last arming
+change, and waits."""
 TAKEOFF_ALTITUDE_SAME_M = 0.005
 """A takeoff altitude this close to the one set is not set again."""
 """After a lost link: how long the last LAND waits for an ack (MAVSDK keeps resending it meanwhile)."""
@@ -299,6 +299,7 @@ class MavsdkVehicle(Vehicle):
             raise ValueError(f"takeoff altitude must be a positive number of metres, got {altitude_m!r}")
         if abs(altitude_m - self._takeoff_altitude_m) <= TAKEOFF_ALTITUDE_SAME_M:
             return
+        self._wait_out_parameter_save()
         try:
             with self._pacer.blocked():
                 resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m), self._cache.link)
@@ -306,6 +307,15 @@ class MavsdkVehicle(Vehicle):
             raise CommandDeniedError(exc.origin, exc.result.name, self._last_text()) from None
         self._takeoff_altitude_m = altitude_m
         self.sleep(PARAMETER_SAVE_S)
+
+    def _wait_out_parameter_save(self) -> None:
+        """Sleep until `parameter_save_guard_s` has passed since the vehicle last armed or disarmed."""
+        vehicle_s, wall_s = self._cache.armed_changed
+        since = self.time_s() - (vehicle_s if self.config.clock == "vehicle" else wall_s)
+        left = self.config.parameter_save_guard_s - since
+        if left > 0:  # NaN (no vehicle clock yet) waits nothing
+            log.info("waiting %.1f s for the vehicle's parameter save before setting a parameter", left)
+            self.sleep(left)
 
     def takeoff(self, altitude_m: float, timeout_s: float | None = None) -> None:
         action = self._require(self._action, "takeoff()")

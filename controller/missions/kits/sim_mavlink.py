@@ -149,7 +149,12 @@ def _start(
     clock = "wall" if mission.sim_speed == 1.0 else "vehicle"
     vehicle = stack.enter_context(
         MavsdkVehicle(
-            MavsdkConfig(url=f"udpin://127.0.0.1:{mavsdk_port}", expected_system_id=system_id, clock=clock),
+            MavsdkConfig(
+                url=f"udpin://127.0.0.1:{mavsdk_port}",
+                expected_system_id=system_id,
+                clock=clock,
+                parameter_save_guard_s=0.0,  # sim-vehicle keeps its parameters in memory
+            ),
             peer_alive=lambda: sim.alive,
         )
     )
