@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from fake_vehicle import FakeVehicle
@@ -34,11 +36,14 @@ def run(instruction: str, targets: list[WallTarget], target: TargetQuery | None 
 def test_centres_the_named_target_not_the_strongest_one_already_centred() -> None:
     result, vehicle = run("centre the red valve", [GAUGE, RED_VALVE, YELLOW_VALVE])
     assert result.outcome is Outcome.CENTRED
-    assert result.steps[0].centred is False  # the gauge is centred, but the gauge was not asked for
-    assert len(result.steps[0].detections) == 3 and result.steps[0].detection.attribute == "red"
+    first, second = result.steps[:2]
+    assert first.centred is False  # the gauge is centred, but the gauge was not asked for
+    assert len(first.detections) == 3 and first.detection.attribute == "red"
+    # A colour asked for is read twice before the first move (`colour_reads`); then towards the red valve.
+    assert first.event == "not_found" and first.action is None
+    assert second.detection.attribute == "red" and second.action.direction() == (1, 1)  # right and up
     assert vehicle.east_m == pytest.approx(0.6, abs=EPSILON / PX_PER_M)
     assert vehicle.up_m == pytest.approx(0.2, abs=EPSILON / PX_PER_M)
-    assert result.steps[0].action.direction() == (1, 1)  # right and up: towards the red valve
 
 
 def test_the_attribute_tells_two_valves_apart_and_the_gauge_is_centred_at_once() -> None:
@@ -153,7 +158,9 @@ def test_the_planner_is_asked_by_kind_and_a_target_it_confirms_is_centred() -> N
     # First the kind alone (its colour is the detector's reading), then the named target's own words.
     assert planner.heard[:2] == ["center the valve", "center the red valve"]
     assert set(planner.heard[2:]) == {"center the red valve"}  # found once: never asked about presence again
-    assert result.steps[0].presence == 0.99 and all(s.presence is None for s in result.steps[1:])
+    # Asked on the second read (the colour read twice), never again.
+    assert result.steps[1].presence == 0.99
+    assert all(s.presence is None for i, s in enumerate(result.steps) if i != 1)
 
 
 def test_a_planner_that_does_not_judge_presence_is_not_asked_before_the_first_move() -> None:
@@ -208,3 +215,46 @@ def test_the_planner_sees_the_other_twin_painted_over_and_the_record_keeps_the_f
     assert first.frame.image[v, u].tolist() == [255, 255, 255]  # the record: the camera's frame
     assert seen[v, u].tolist() == ([90, 90, 90] if paint else [255, 255, 255])  # the other valve: wall
     assert seen[red_v, red_u].tolist() == seen[gauge_v, gauge_u].tolist() == [255, 255, 255]  # the rest kept
+
+
+class FlickeringColourDetector(FakeMultiTargetDetector):
+    """Reads one target's colour as `misread` on the listed calls (a trim read that flips between frames)."""
+
+    def __init__(self, vehicle, targets, misread: str, on_calls: set[int]) -> None:  # type: ignore[no-untyped-def]
+        super().__init__(vehicle, targets)
+        self.misread, self.on_calls = misread, on_calls
+
+    def detect_all(self, image: np.ndarray) -> list[Detection]:
+        call, found = self.calls, super().detect_all(image)
+        if call in self.on_calls:
+            found = [replace(d, attribute=self.misread) if d.kind == "valve" else d for d in found]
+        return found
+
+
+def _run_with(detector_reads: set[int], instruction: str, **kw) -> tuple:  # type: ignore[no-untyped-def]
+    vehicle = FakeVehicle.at_pose()
+    detector = FlickeringColourDetector(vehicle, [GAUGE, RED_VALVE], "grey", detector_reads)
+    config = CentringConfig(epsilon_px=EPSILON, instruction=instruction, **kw)
+    loop = CentringLoop(vehicle, FakeCamera(), detector, ClassicPlanner(), config)
+    return loop.run(), vehicle
+
+
+def test_a_colour_read_once_is_not_flown_to() -> None:
+    """The red valve read grey on the first frame only: asked for the grey valve, which is not there, the
+    loop ends `target_not_found` without a move (it flew towards it when one read sufficed)."""
+    result, vehicle = _run_with({0}, "centre the grey valve")
+    assert result.outcome is Outcome.TARGET_NOT_FOUND and vehicle.moves_commanded == 0
+    assert result.steps[0].detection is not None and result.steps[0].detection.attribute == "grey"
+    once, _ = _run_with({0}, "centre the grey valve", colour_reads=1)
+    assert once.outcome is not Outcome.TARGET_NOT_FOUND and once.moves > 0  # one read: flown to
+
+
+def test_a_colour_misread_once_delays_the_right_target_by_reads_only() -> None:
+    """The red valve read grey on the second frame: asked for the red valve, the loop needs two reads in
+    a row, gets them on the third and fourth, and centres it."""
+    result, vehicle = _run_with({1}, "centre the red valve")
+    assert result.outcome is Outcome.CENTRED
+    assert [s.event for s in result.steps[:3]] == ["not_found"] * 3 and result.steps[3].action is not None
+    assert vehicle.east_m == pytest.approx(0.6, abs=EPSILON / PX_PER_M)
+    unasked, _ = _run_with({1}, "centre the valve")  # no colour asked: the first read is taken
+    assert unasked.outcome is Outcome.CENTRED and unasked.steps[0].action is not None

@@ -82,6 +82,13 @@ verdict is asked for until the target is found, not after: once found, the targe
 follows is the one both agreed on, and a presence read at every later step would add a chance of
 a false "not in view" to every step of every centring.
 
+A target asked for by its colour is found only when `colour_reads` reads in a row show a detection of
+it near one place (`COLOUR_READ_PLACE`): a trim colour read on a small box, or on one the image's edge
+cuts, can flip between frames of an unmoved camera (a red valve at the bottom edge read grey once and
+red on the next reads, and the loop flew towards the "grey valve" it was asked for, which was not
+there). The reads before that are not-found reads (the detection kept in their records), and count
+against `not_found_rereads`.
+
 Twins: two targets of one kind differ only in a thin trim band, which the detector reads and the
 planner reads poorly. The planner is shown the frame with the other detections of the chosen
 detection's kind painted over (`paint_over_twins`, on by default; `perception.masking`), so it
@@ -134,6 +141,10 @@ from perception.masking import paint_over
 from perception.types import Detection, Frame
 
 log = logging.getLogger(__name__)
+
+COLOUR_READ_PLACE = 0.1
+"""Two reads' detections of a target asked for by its colour are of one place when their centres lie
+within this fraction of the image's width (the camera holds still between them)."""
 
 
 # ------------------------------------------------------------------ the choices near and away from ε
@@ -205,6 +216,7 @@ class _RunState:
     second_choices: int = 0
     rereads: int = 0
     seen_target: bool = False  # the named target was found (detected, the planner not against) in this run
+    colour_sightings: list[Detection] = field(default_factory=list)  # consecutive reads of an asked colour
     recoveries: int = 0
     last_move: tuple[Action, tuple[float, float]] | None = None
     before_move: np.ndarray | None = None  # the picture the last move was planned on
@@ -232,6 +244,8 @@ class CentringLoop:
             record = self._observe_fresh(len(self.steps), state)
             outcome: Outcome | None = None
             unconfirmed = record.detection is not None and not state.seen_target
+            if unconfirmed and not self._colour_read_enough(record, state):
+                unconfirmed = False  # a not-found read, its detection kept in the record
             plan = self._confirm(record, state) if unconfirmed else None
             if not state.seen_target:
                 outcome = self._on_not_found(record, state)
@@ -278,6 +292,19 @@ class CentringLoop:
             return record.frame.image
         twins = [d.bbox_px for d in record.detections if d is not chosen and d.kind == chosen.kind]
         return paint_over(record.frame.image, twins)
+
+    def _colour_read_enough(self, record: StepRecord, state: _RunState) -> bool:
+        """Before the target is found, its detection on this read: whether `colour_reads` reads in a row
+        (this one the last) showed it near one place. Always True when no colour was asked for."""
+        if self.target.attribute is None:
+            return True
+        detection, seen = record.detection, state.colour_sightings
+        assert detection is not None
+        reach = COLOUR_READ_PLACE * record.frame.width
+        if seen and math.dist(seen[-1].centre_px, detection.centre_px) > reach:
+            seen.clear()
+        seen.append(detection)
+        return len(seen) >= self.config.colour_reads
 
     def _confirm(self, record: StepRecord, state: _RunState) -> Plan | None:
         """The named target detected before it was found in this run: found unless the planner says its
@@ -372,6 +399,8 @@ class CentringLoop:
         """The named target not found yet in this run (not detected, or detected where the planner says
         it is not in view): hold and re-read (bounded), never move."""
         self.vehicle.hold()
+        if record.detection is None:
+            state.colour_sightings.clear()
         if record.event is not StepEvent.NOT_IN_VIEW:
             record.event = StepEvent.NOT_FOUND
         if state.rereads < self.config.not_found_rereads:

@@ -67,6 +67,9 @@ class LoopSettings(BaseModel):
     max_second_choices: int = Field(default=4, ge=0, le=20)
     """Moves per run flown on the planner's best-ranked move after it chose "no move" far from centre
     (0: never; such a choice is then a stall; see the module docstring of planning.loop)."""
+    colour_reads: int = Field(default=2, ge=1, le=10)
+    """Reads in a row that must show a target asked for by its colour, near one place, before it is
+    found (1: the first read; see the module docstring of planning.loop)."""
     confirm_with_planner: bool = True
     """Take a detection for the named target only if a planner that judges presence (a calibrated latent
     checkpoint) does not say its kind is out of view; False: the detector alone decides."""
