@@ -139,7 +139,7 @@ def colour_codes() -> tuple[tuple[str, str], ...]:
 @functools.lru_cache(maxsize=32)
 def colour_words(vocabulary: Vocabulary) -> ColourWords:
     """The table's names read against `vocabulary`'s trim colours (cached per vocabulary)."""
-    declared = {w: c.name for c in vocabulary.colours.values() for w in c.words}
+    declared = vocabulary.colour_of_word
     declared_single = {w: name for w, name in declared.items() if " " not in w}
     kind_words = {w for kind in vocabulary.kinds.values() for phrase in kind.words for w in phrase.split()}
     ordinary = kind_words | set(vocabulary.instruction_words)

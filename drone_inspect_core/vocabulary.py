@@ -102,6 +102,11 @@ class Vocabulary:
     def colour_names(self) -> tuple[str, ...]:
         return tuple(self.colours)
 
+    @functools.cached_property
+    def colour_of_word(self) -> Mapping[str, str]:
+        """Each declared colour word ("crimson") → the name of its trim colour ("red")."""
+        return {word: colour.name for colour in self.colours.values() for word in colour.words}
+
     def kind(self, name: str) -> TargetKind:
         """The kind called `name`; `UnknownKindError` listing the known ones otherwise."""
         try:

@@ -39,7 +39,7 @@ def test_the_table_reads_names_as_the_trim_their_hue_or_lightness_is() -> None:
     assert {"gn", "grn", "wht", "og"} <= words.unmatched
     # The vocabulary's own words are never the table's to read, and the rule agrees with them where the
     # survey has the same name.
-    declared = {w: c.name for c in vocabulary.colours.values() for w in c.words}
+    declared = vocabulary.colour_of_word
     assert not set(declared) & set(words.named)
     survey = dict(colour_table())
     agreeing = {w: nearest_trim(vocabulary, survey[w]) for w in declared if w in survey}

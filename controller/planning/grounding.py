@@ -151,7 +151,7 @@ def _stands_as_colour(match: re.Match[str], words: str, vocabulary: Vocabulary) 
     """Whether a colour phrase found in `words` is one: a declared colour word, or a name ending in one,
     always; another colour name of the table only in a colour's place (`_in_colour_place`)."""
     phrase = match.group()
-    if phrase not in colour_words(vocabulary).named or _is_declared_colour(phrase.split()[-1], vocabulary):
+    if phrase not in colour_words(vocabulary).named or phrase.split()[-1] in vocabulary.colour_of_word:
         return True
     return _in_colour_place(words, match.start(), match.end(), vocabulary)
 
@@ -174,10 +174,6 @@ def _in_colour_place(words: str, start: int, end: int, vocabulary: Vocabulary) -
             break
         run.append(word)
     return bool(run) and _patterns(vocabulary)[0].search(" ".join(run)) is not None
-
-
-def _is_declared_colour(word: str, vocabulary: Vocabulary) -> bool:
-    return any(word in colour.words for colour in vocabulary.colours.values())
 
 
 SUGGEST_CUTOFF = 0.6
