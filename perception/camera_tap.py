@@ -20,7 +20,8 @@ import time
 from collections.abc import Callable
 
 from perception.camera import Camera
-from perception.errors import CameraClosedError, CameraError, CameraTimeoutError
+from perception.errors import CameraError, CameraTimeoutError
+from perception.newest_frame import NewestFrame
 from perception.types import Frame
 
 log = logging.getLogger(__name__)
@@ -43,12 +44,9 @@ class CameraTap(Camera):
         self.camera = camera
         self.name = name or getattr(camera, "name", "camera")
         self._period_s = 0.0 if max_fps is None else 1.0 / max_fps
-        self._cond = threading.Condition()
-        self._latest: Frame | None = None
-        self._last_returned = -1
-        self._failure: CameraError | None = None  # the camera's own lasting failure (ended, closed)
+        self._frames = NewestFrame(self.name)
+        self._cond = self._frames.cond
         self._listeners: list[FrameListener] = []
-        self._closed = False
         self._stop = threading.Event()
         self._last_frame_monotonic = time.monotonic()
         self.frames = 0
@@ -76,11 +74,10 @@ class CameraTap(Camera):
                 self._fail(CameraError(self.name, f"{type(exc).__name__}: {exc}"))
                 return
             with self._cond:
-                self._latest = frame
+                self._frames.put(frame)
                 self._last_frame_monotonic = time.monotonic()
                 self.frames += 1
                 listeners = list(self._listeners)
-                self._cond.notify_all()
             for listener in listeners:
                 try:
                     listener(frame)
@@ -88,9 +85,7 @@ class CameraTap(Camera):
                     log.exception("camera tap %s: a frame listener failed", self.name)
 
     def _fail(self, error: CameraError) -> None:
-        with self._cond:
-            self._failure = error
-            self._cond.notify_all()
+        self._frames.end(error)
         log.warning("camera tap %s: %s", self.name, error)
 
     # --- consumers ----------------------------------------------------------------------------
@@ -107,7 +102,7 @@ class CameraTap(Camera):
     def latest(self) -> Frame | None:
         """The newest frame, whoever has seen it (None before the first)."""
         with self._cond:
-            return self._latest
+            return self._frames.latest
 
     def silent_s(self) -> float:
         """Seconds since the last frame arrived (since the tap started, before the first)."""
@@ -117,35 +112,17 @@ class CameraTap(Camera):
     @property
     def failure(self) -> CameraError | None:
         """The camera's lasting failure (stream ended, closed), None while it delivers."""
-        with self._cond:
-            return self._failure
+        return self._frames.ended
 
     def read(self, timeout_s: float | None = None) -> Frame:
         """The newest frame not returned by `read()` before; `CameraTimeoutError` after `timeout_s`."""
         timeout = READ_TIMEOUT_S * 4 if timeout_s is None else timeout_s
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                if self._closed:
-                    raise CameraClosedError(self.name, "read() after close()")
-                latest = self._latest
-                if latest is not None and latest.frame_number > self._last_returned:
-                    self._last_returned = latest.frame_number
-                    return latest
-                if self._failure is not None:
-                    raise self._failure
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    raise CameraTimeoutError(self.name, timeout, "no frame from the camera")
-                self._cond.wait(remaining)
+        return self._frames.take(timeout, lambda: "no frame from the camera")
 
     def close(self) -> None:
         """Stop the reader and close the camera (idempotent)."""
-        with self._cond:
-            if self._closed:
-                return
-            self._closed = True
-            self._cond.notify_all()
+        if not self._frames.close():
+            return
         self._stop.set()
         self._thread.join(READ_TIMEOUT_S * 4)
         self.camera.close()

@@ -30,12 +30,8 @@ from pathlib import Path
 import cv2
 
 from perception.camera import Camera
-from perception.errors import (
-    CameraClosedError,
-    CameraOpenError,
-    CameraStreamEndedError,
-    CameraTimeoutError,
-)
+from perception.errors import CameraOpenError, CameraStreamEndedError
+from perception.newest_frame import NewestFrame
 from perception.types import Frame
 
 log = logging.getLogger(__name__)
@@ -87,15 +83,12 @@ class StreamCamera(Camera):
         self._pace = self._is_file and realtime_file and not live_file
         self._reconnect = reconnect and (live_file or not self._is_file)
         self._open_timeout_s = open_timeout_s
-        self._cond = threading.Condition()
+        self._frames = NewestFrame(self.name)
+        self._cond = self._frames.cond
         self._stop = threading.Event()
         self._opened = threading.Event()
-        self._latest: Frame | None = None
-        self._last_returned = -1
         self._open_failed = False
-        self._ended: str | None = None  # why the reader stopped for good
         self._dropped: str | None = None  # why the reader is reconnecting
-        self._closed = False
         self.frames_received = 0
         self.frames_returned = 0
         self.reconnects = 0
@@ -120,7 +113,7 @@ class StreamCamera(Camera):
         return cv2.VideoCapture(self.source, cv2.CAP_FFMPEG, params)
 
     def _run(self) -> None:
-        """Reader thread: open, decode into `_latest`, and reconnect after a drop (live sources)."""
+        """Reader thread: open, decode into `_frames`, and reconnect after a drop (live sources)."""
         number = 0
         try:
             while not self._stop.is_set():
@@ -149,8 +142,7 @@ class StreamCamera(Camera):
                     if self._reconnect:
                         self._dropped = f"{reason}; reconnecting"
                     else:
-                        self._ended = reason
-                    self._cond.notify_all()
+                        self._frames.end(CameraStreamEndedError(self.name, reason))
                 if not self._reconnect:
                     return
                 log.warning("camera %s: %s; reconnecting", self.name, reason)
@@ -169,9 +161,8 @@ class StreamCamera(Camera):
             frame = Frame(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), time.monotonic(), number)
             number += 1
             with self._cond:
-                self._latest = frame
+                self._frames.put(frame)
                 self.frames_received = number
-                self._cond.notify_all()
             if period_s:
                 self._stop.wait(max(0.0, start + (number - first) * period_s - time.monotonic()))
         return number
@@ -179,30 +170,15 @@ class StreamCamera(Camera):
     def read(self, timeout_s: float | None = None) -> Frame:
         """The newest frame received since the last `read()`; waits up to `timeout_s`."""
         timeout = self.timeout_s if timeout_s is None else timeout_s
-        deadline = time.monotonic() + timeout
         with self._cond:
-            while True:
-                if self._closed:
-                    raise CameraClosedError(self.name, "read() after close()")
-                latest = self._latest
-                if latest is not None and latest.frame_number > self._last_returned:
-                    self._last_returned = latest.frame_number
-                    self.frames_returned += 1
-                    return latest
-                if self._ended is not None:
-                    raise CameraStreamEndedError(self.name, self._ended)
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    raise CameraTimeoutError(self.name, timeout, self._dropped or "stream stalled or frozen")
-                self._cond.wait(remaining)
+            frame = self._frames.take(timeout, lambda: self._dropped or "stream stalled or frozen")
+            self.frames_returned += 1
+            return frame
 
     def close(self, timeout_s: float = 1.0) -> None:
         """Stop the reader; it releases the capture as soon as its current decode returns."""
-        with self._cond:
-            if self._closed:
-                return
-            self._closed = True
-            self._cond.notify_all()
+        if not self._frames.close():
+            return
         self._stop.set()
         self._thread.join(timeout_s)
         if self._thread.is_alive():  # normal on a live stream with no new frame: it exits on its own
