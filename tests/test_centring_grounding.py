@@ -40,7 +40,7 @@ def test_centres_the_named_target_not_the_strongest_one_already_centred() -> Non
     assert first.centred is False  # the gauge is centred, but the gauge was not asked for
     assert len(first.detections) == 3 and first.detection.attribute == "red"
     # A colour asked for is read twice before the first move (`colour_reads`); then towards the red valve.
-    assert first.event == "not_found" and first.action is None
+    assert first.event == "colour_check" and first.action is None
     assert second.detection.attribute == "red" and second.action.direction() == (1, 1)  # right and up
     assert vehicle.east_m == pytest.approx(0.6, abs=EPSILON / PX_PER_M)
     assert vehicle.up_m == pytest.approx(0.2, abs=EPSILON / PX_PER_M)
@@ -254,7 +254,8 @@ def test_a_colour_misread_once_delays_the_right_target_by_reads_only() -> None:
     a row, gets them on the third and fourth, and centres it."""
     result, vehicle = _run_with({1}, "centre the red valve")
     assert result.outcome is Outcome.CENTRED
-    assert [s.event for s in result.steps[:3]] == ["not_found"] * 3 and result.steps[3].action is not None
+    assert [s.event for s in result.steps[:3]] == ["colour_check", "not_found", "colour_check"]
+    assert result.steps[3].action is not None
     assert vehicle.east_m == pytest.approx(0.6, abs=EPSILON / PX_PER_M)
     unasked, _ = _run_with({1}, "centre the valve")  # no colour asked: the first read is taken
     assert unasked.outcome is Outcome.CENTRED and unasked.steps[0].action is not None

@@ -86,8 +86,8 @@ A target asked for by its colour is found only when `colour_reads` reads in a ro
 it near one place (`COLOUR_READ_PLACE`): a trim colour read on a small box, or on one the image's edge
 cuts, can flip between frames of an unmoved camera (a red valve at the bottom edge read grey once and
 red on the next reads, and the loop flew towards the "grey valve" it was asked for, which was not
-there). The reads before that are not-found reads (the detection kept in their records), and count
-against `not_found_rereads`.
+there). The reads before that are not-found reads (event "colour_check", the detection kept in their
+records), and count against `not_found_rereads`.
 
 Twins: two targets of one kind differ only in a thin trim band, which the detector reads and the
 planner reads poorly. The planner is shown the frame with the other detections of the chosen
@@ -245,7 +245,7 @@ class CentringLoop:
             outcome: Outcome | None = None
             unconfirmed = record.detection is not None and not state.seen_target
             if unconfirmed and not self._colour_read_enough(record, state):
-                unconfirmed = False  # a not-found read, its detection kept in the record
+                unconfirmed, record.event = False, StepEvent.COLOUR_CHECK  # a not-found read
             plan = self._confirm(record, state) if unconfirmed else None
             if not state.seen_target:
                 outcome = self._on_not_found(record, state)
@@ -401,7 +401,7 @@ class CentringLoop:
         self.vehicle.hold()
         if record.detection is None:
             state.colour_sightings.clear()
-        if record.event is not StepEvent.NOT_IN_VIEW:
+        if record.event not in (StepEvent.NOT_IN_VIEW, StepEvent.COLOUR_CHECK):
             record.event = StepEvent.NOT_FOUND
         if state.rereads < self.config.not_found_rereads:
             state.rereads += 1

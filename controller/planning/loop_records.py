@@ -167,6 +167,9 @@ class StepEvent(str, Enum):
     NOT_FOUND = "not_found"
     NOT_IN_VIEW = "not_in_view"
     """The detector saw the named kind and colour; the planner said the asked-for target is not in view."""
+    COLOUR_CHECK = "colour_check"
+    """The detector saw the named kind in the colour asked for, on fewer reads in a row than `colour_reads`:
+    the loop holds and reads again before it takes it (a not-found read)."""
     RECOVERY = "recovery"
     REFINEMENT = "refinement"
     SECOND_CHOICE = "second_choice"
