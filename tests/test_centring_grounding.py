@@ -259,3 +259,17 @@ def test_a_colour_misread_once_delays_the_right_target_by_reads_only() -> None:
     assert vehicle.east_m == pytest.approx(0.6, abs=EPSILON / PX_PER_M)
     unasked, _ = _run_with({1}, "centre the valve")  # no colour asked: the first read is taken
     assert unasked.outcome is Outcome.CENTRED and unasked.steps[0].action is not None
+
+
+def test_a_kind_asked_without_its_colour_among_twins_says_which_one_it_took() -> None:
+    """ "centre the valve" with a red and a yellow valve in view: the strongest is centred, and the message
+    names both and the one taken, so the operator can name a colour; with one valve it says nothing more."""
+    result, vehicle = run("centre the valve", [GAUGE, RED_VALVE, YELLOW_VALVE])
+    assert result.outcome is Outcome.CENTRED
+    assert vehicle.east_m == pytest.approx(-0.6, abs=EPSILON / PX_PER_M)  # the yellow one: 0.8 beats 0.7
+    assert "2 of that kind were in view (valve (yellow), valve (red))" in result.message
+    assert "it took the strongest, valve (yellow); name a colour to choose" in result.message
+    alone, _ = run("centre the valve", [GAUGE, RED_VALVE])
+    assert alone.outcome is Outcome.CENTRED and "of that kind" not in alone.message
+    named, _ = run("centre the red valve", [GAUGE, RED_VALVE, YELLOW_VALVE])
+    assert named.outcome is Outcome.CENTRED and "of that kind" not in named.message

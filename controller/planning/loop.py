@@ -88,6 +88,9 @@ cuts, can flip between frames of an unmoved camera (a red valve at the bottom ed
 red on the next reads, and the loop flew towards the "grey valve" it was asked for, which was not
 there). The reads before that are not-found reads (event "colour_check", the detection kept in their
 records), and count against `not_found_rereads`.
+A kind asked for without a colour, with several of it in view when it is found: the loop takes the
+strongest (`select_target`), and its message names every one of them and the one taken, so the operator
+can name a colour instead.
 
 Twins: two targets of one kind differ only in a thin trim band, which the detector reads and the
 planner reads poorly. The planner is shown the frame with the other detections of the chosen
@@ -217,6 +220,7 @@ class _RunState:
     rereads: int = 0
     seen_target: bool = False  # the named target was found (detected, the planner not against) in this run
     colour_sightings: list[Detection] = field(default_factory=list)  # consecutive reads of an asked colour
+    found_among: tuple[Detection, ...] = ()  # no colour asked: the kind's detections when found, taken first
     recoveries: int = 0
     last_move: tuple[Action, tuple[float, float]] | None = None
     before_move: np.ndarray | None = None  # the picture the last move was planned on
@@ -247,6 +251,10 @@ class CentringLoop:
             if unconfirmed and not self._colour_read_enough(record, state):
                 unconfirmed, record.event = False, StepEvent.COLOUR_CHECK  # a not-found read
             plan = self._confirm(record, state) if unconfirmed else None
+            if unconfirmed and state.seen_target and self.target.attribute is None:
+                chosen = record.detection
+                others = (d for d in record.detections if d.kind == chosen.kind and d is not chosen)
+                state.found_among = (chosen, *others)  # the one taken first
             if not state.seen_target:
                 outcome = self._on_not_found(record, state)
             elif record.detection is None:
@@ -265,7 +273,7 @@ class CentringLoop:
             self._keep(record)
             if outcome is not None:
                 self.vehicle.hold()
-                message = self._message(outcome, state.decisions, record)
+                message = self._message(outcome, state.decisions, record) + self._choice_note(state)
                 log.info("centring loop: %s", message)
                 return CentringResult(outcome, self.steps, message)
 
@@ -524,6 +532,17 @@ class CentringLoop:
         self.steps.append(record)
         if self.on_step is not None:
             self.on_step(record)
+
+    def _choice_note(self, state: _RunState) -> str:
+        """With no colour asked and several targets of the kind in view when it was found: which one the
+        loop took, and how to ask for another ("" otherwise)."""
+        seen = state.found_among
+        if len(seen) < 2:
+            return ""
+        return (
+            f"; {len(seen)} of that kind were in view ({describe_seen(seen)}): it took the strongest, "
+            f"{describe_seen(seen[:1])}; name a colour to choose"
+        )
 
     def _message(self, outcome: Outcome, decisions: int, last: StepRecord) -> str:
         cfg = self.config
