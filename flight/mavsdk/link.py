@@ -46,8 +46,9 @@ changes some itself when it arms (the flight's UUID) and disarms (the flight-tim
 set while a save ran failed the save's verify ("invalid BSON value"), and PX4 in lockstep then stalled
 for good (its simulator link silent: LINK_LOST): the next mission's takeoff altitude, set soon after the
 last mission's disarm on a warm PX4, stalled it in 2 of 3 runs of `dronectl benchmark-missions --n 2
---vehicle px4-sitl` (8 missions each). 2.5 s after an arming change the save it caused is over, and the
-save of the new altitude comes 0.3 s after it is set (`PARAMETER_SAVE_S` waits that out)."""
+--seed 11 --vehicle px4-sitl --planner latent,classic,random,oracle` (8 missions each). 2.5 s after an
+arming change the save it caused is over, and the save of the new altitude comes 0.3 s after it is set
+(`PARAMETER_SAVE_S` waits that out)."""
 
 
 @dataclass(frozen=True)

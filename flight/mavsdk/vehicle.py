@@ -58,6 +58,7 @@ READY_REPORT_EVERY_S = 5.0
 DISARM_RACE_WAIT_S = 3.0
 OFFBOARD_START_ATTEMPTS = 3
 LAST_LAND_ACK_WAIT_S = 0.5
+"""After a lost link: how long the last LAND waits for an ack (MAVSDK keeps resending it meanwhile)."""
 PARAMETER_SAVE_S = 0.5
 """Vehicle-clock seconds left after setting the takeoff altitude, before arming, for PX4 to save its
 parameters (it does 0.3 s after a change). Set after arming, it raced the save PX4 makes when it arms
@@ -66,7 +67,6 @@ PX4. So `prepare_takeoff` sets it before arming, at least `parameter_save_guard_
 change, and waits."""
 TAKEOFF_ALTITUDE_SAME_M = 0.005
 """A takeoff altitude this close to the one set is not set again."""
-"""After a lost link: how long the last LAND waits for an ack (MAVSDK keeps resending it meanwhile)."""
 
 
 class MavsdkVehicle(Vehicle):
