@@ -99,6 +99,7 @@ class MavsdkVehicle(Vehicle):
         self._offboard: Offboard | None = None
         self._setpoint_set = False
         self._last_setpoint = VelocityBody()
+        self._setpoint_sent_s = -math.inf  # when (`time_s`) a setpoint last went out, sent or streamed
         self._in_offboard = False
         self._ground_down_m = math.nan
         self._takeoff_altitude_m = math.nan  # the takeoff altitude last set (PX4 keeps it)
@@ -219,20 +220,23 @@ class MavsdkVehicle(Vehicle):
             time.sleep(max(0.0, seconds))
             return
         until = self.time_s() + seconds
-        next_setpoint_s = self.time_s() + self.config.offboard_stream_period_s
         while (now_s := self.time_s()) < until:
             self._cache.link.check("sleep()")  # a frozen vehicle clock ends here, as a lost link
             self._pacer.tick(now_s)
-            if self._in_offboard and now_s >= next_setpoint_s and self._offboard is not None:
-                next_setpoint_s = now_s + self.config.offboard_stream_period_s
-                self._stream_setpoint()
+            # Due a period after the last setpoint *sent*, not after this wait began: a caller's short
+            # waits (a settle polled every 0.1 s, each ending just as the vehicle reached the lead the
+            # last setpoint gave it) must not starve a lockstep that runs only as far as setpoints carry it.
+            stream_due = now_s - self._setpoint_sent_s >= self.config.offboard_stream_period_s
+            if self._in_offboard and self._offboard is not None and stream_due:
+                self._stream_setpoint(now_s)
             time.sleep(0.002)
 
-    def _stream_setpoint(self) -> None:
+    def _stream_setpoint(self, now_s: float) -> None:
         """The last setpoint again, on the vehicle's clock (`MavsdkConfig.offboard_stream_period_s`);
         a refusal here is left to the next command, which reports it."""
         assert self._offboard is not None
         v = self._last_setpoint
+        self._setpoint_sent_s = now_s
         with contextlib.suppress(OffboardError):
             self._offboard.set_velocity_body(
                 VelocityBodyYawspeed(v.forward_m_s, v.right_m_s, v.down_m_s, v.yawspeed_deg_s)
@@ -353,11 +357,13 @@ class MavsdkVehicle(Vehicle):
         setpoint = VelocityBodyYawspeed(
             velocity.forward_m_s, velocity.right_m_s, velocity.down_m_s, velocity.yawspeed_deg_s
         )
+        sent_s = self.time_s()
         try:
             offboard.set_velocity_body(setpoint)
         except OffboardError as exc:
             raise CommandDeniedError("set_velocity_body()", exc.result.name) from None
         self._last_setpoint = velocity
+        self._setpoint_sent_s = sent_s
         self._setpoint_set = True
         self.setpoints_sent += 1
 
