@@ -83,3 +83,17 @@ class OffboardInterruptedError(FlightError):
 
 class GeofenceBreachError(FlightError):
     """The vehicle is outside the geofence box (beyond its margin) around the start point."""
+
+
+class TakeoffOvershootError(FlightError):
+    """A takeoff climbed well past the altitude asked for (and was stopped in Hold): on PX4, copies of one
+    takeoff command each start a new takeoff from the altitude the drone has reached (see
+    `flight.mavsdk.vehicle.MavsdkVehicle.takeoff`)."""
+
+    def __init__(self, origin: str, height_m: float, asked_m: float, limit_m: float) -> None:
+        super().__init__(
+            origin,
+            "TAKEOFF_OVERSHOOT",
+            f"climbed to {height_m:.2f} m on a takeoff to {asked_m:.2f} m (the limit is {limit_m:.2f} m): "
+            "stopped in Hold",
+        )

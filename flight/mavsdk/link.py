@@ -62,6 +62,10 @@ class MavsdkConfig:
     arm_retry_period_s: float = 0.5
     altitude_tolerance_m: float = 0.3
     climb_done_speed_m_s: float = 0.2  # takeoff ends when the climb has (nearly) stopped
+    takeoff_overshoot_m: float = 1.0
+    """A takeoff that climbs this far above its altitude is stopped in Hold and raised
+    (`TakeoffOvershootError`): copies of one NAV_TAKEOFF can each climb PX4 higher
+    (`MavsdkVehicle.takeoff`)."""
     poll_s: float = 0.02
     expected_system_id: int | None = None
     shown_url: str | None = None
@@ -89,6 +93,8 @@ class MavsdkConfig:
             raise ValueError("MavsdkConfig: offboard_stream_period_s must be > 0")
         if not 0 <= self.parameter_save_guard_s < math.inf:
             raise ValueError("MavsdkConfig: parameter_save_guard_s must be >= 0")
+        if not 0 < self.takeoff_overshoot_m < math.inf:
+            raise ValueError("MavsdkConfig: takeoff_overshoot_m must be > 0")
 
     @property
     def link_timeout(self) -> float:
@@ -102,20 +108,28 @@ COMMAND_ATTEMPTS = 3
 
 
 def resend_on_timeout(
-    call: Callable[[], Any], link: LinkMonitor | None = None, attempts: int = COMMAND_ATTEMPTS
+    call: Callable[[], Any],
+    link: LinkMonitor | None = None,
+    attempts: int = COMMAND_ATTEMPTS,
+    taken: Callable[[], bool] | None = None,
 ) -> Any:
     """Run a MAVSDK command, sending it again when it timed out (every ack lost on a lossy link).
 
     MAVSDK already resends a command four times, 0.5 s apart, before TIMEOUT; on a radio that
-    loses a fifth of the packets each way that still fails about once in 170 commands. These
-    commands (takeoff, hold, land, disarm, offboard start/stop) are idempotent on PX4, so sending
-    them again is safe. Any other result is raised at once. With `link`, a last TIMEOUT from a
-    vehicle gone silent is a lost link (`LinkLostError`), not a refusal.
+    loses a fifth of the packets each way that still fails about once in 170 commands. Hold, land,
+    disarm and offboard start/stop are idempotent on PX4, so sending them again is safe; a takeoff is
+    not (`MavsdkVehicle.takeoff`), and passes `taken`: whether the vehicle already shows the command's
+    effect, in which case a TIMEOUT lost only the acknowledgement and nothing is sent again. Any other
+    result is raised at once. With `link`, a last TIMEOUT from a vehicle gone silent is a lost link
+    (`LinkLostError`), not a refusal.
     """
     for attempt in range(1, attempts + 1):
         try:
             return call()
         except (ActionError, OffboardError) as exc:
+            if exc.result.name == "TIMEOUT" and taken is not None and taken():
+                log.info("%s timed out, but the vehicle shows it taken: not sent again", exc.origin)
+                return None
             if exc.result.name != "TIMEOUT" or attempt == attempts:
                 if exc.result.name == "TIMEOUT" and link is not None:
                     link.raise_if_lost(str(exc.origin))

@@ -40,9 +40,11 @@ from mavsdk.plugins.telemetry import Telemetry as MavsdkTelemetry
 
 from flight.errors import (
     CommandDeniedError,
+    FlightError,
     FlightTimeoutError,
     ModeChangeError,
     OffboardInterruptedError,
+    TakeoffOvershootError,
     VehicleConnectionError,
 )
 from flight.mavsdk.link import MavsdkConfig, TelemetryCache, resend_on_timeout, route_mavsdk_logs
@@ -330,26 +332,49 @@ class MavsdkVehicle(Vehicle):
                 if not abs(altitude_m - self._takeoff_altitude_m) <= TAKEOFF_ALTITUDE_SAME_M:  # unprepared
                     resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m), self._cache.link)
                     self._takeoff_altitude_m = altitude_m
-                resend_on_timeout(action.takeoff, self._cache.link)
+                resend_on_timeout(action.takeoff, self._cache.link, taken=self._takeoff_taken)
         except ActionError as exc:
             armed = self.telemetry().armed
             detail = self._last_text() or ("the vehicle is not armed" if not armed else "")
             raise CommandDeniedError(exc.origin, exc.result.name, detail) from None
         target_m = altitude_m - self.config.altitude_tolerance_m
+        limit_m = altitude_m + self.config.takeoff_overshoot_m
+
         # Done when PX4 says so (it leaves TAKEOFF for HOLD at the altitude), not merely when the
         # climb is slow: a low takeoff (0.5 m) rises slowly all the way, and was taken for finished
-        # 0.3 m short of it.
-        self._wait(
-            lambda t: (
+        # 0.3 m short of it. Bounded above: PX4 takes every NAV_TAKEOFF it receives (MAVSDK sends
+        # its altitude as NaN) as a new takeoff to its current altitude plus MIS_TAKEOFF_ALT
+        # (navigator's Takeoff::set_takeoff_position), so when acknowledgements are lost MAVSDK's own
+        # copies of the command, 0.5 s of wall time apart (seconds of a fast lockstep's clock), can
+        # arrive after liftoff and each climb it higher (once to 6.04 m: docs/px4.md).
+        def done(t: Telemetry) -> bool:
+            height_m = self._ground_down_m - t.position_ned.down_m
+            if height_m > limit_m:
+                raise TakeoffOvershootError("takeoff()", height_m, altitude_m, limit_m)
+            return (
                 t.in_air
                 and t.flight_mode != FlightMode.TAKEOFF
-                and self._ground_down_m - t.position_ned.down_m >= target_m
+                and height_m >= target_m
                 and abs(t.velocity_ned.down_m_s) < self.config.climb_done_speed_m_s
-            ),
-            timeout_s or self.config.timeouts.takeoff_s,
-            "takeoff()",
-            f"in-air state, altitude {target_m:.2f} m, the takeoff mode left and the climb ending",
-        )
+            )
+
+        try:
+            self._wait(
+                done,
+                timeout_s or self.config.timeouts.takeoff_s,
+                "takeoff()",
+                f"in-air state, altitude {target_m:.2f} m, the takeoff mode left and the climb ending",
+            )
+        except TakeoffOvershootError:
+            log.error("the takeoff climbed past %.2f m: holding", limit_m)
+            with contextlib.suppress(FlightError, ActionError):
+                self.hold()  # PX4's Hold keeps the altitude reached; the caller lands
+            raise
+
+    def _takeoff_taken(self) -> bool:
+        """Whether the vehicle shows a takeoff under way (its TAKEOFF mode, or in the air)."""
+        telemetry = self.telemetry()
+        return telemetry.flight_mode == FlightMode.TAKEOFF or telemetry.in_air
 
     def set_velocity_body(self, velocity: VelocityBody) -> None:
         offboard = self._require(self._offboard, "set_velocity_body()")
