@@ -8,6 +8,10 @@ Written for real PX4 (SITL or hardware) as much as for `dronectl sim-vehicle`:
   ACCEPTED and then refuse), never from the ack alone;
 - offboard is left for Hold before landing (else PX4 returns to OFFBOARD after
   disarm and refuses the next arm); a disarm racing PX4's auto-disarm is success.
+- a takeoff is not idempotent on PX4 (each copy climbs on from where the drone is): it is
+  sent again only while the vehicle shows no sign of it, a climb past `takeoff_overshoot_m`
+  is stopped in Hold, and a vehicle that disarmed on the ground first is armed again and
+  asked again, once (`takeoff`).
 - MAVSDK re-sends the last setpoint at 20 Hz by itself: `set_velocity_body` is
   called only when the command changes or the caller refreshes it, never in a loop.
 - link loss (no telemetry for `link_timeout`, or MAVSDK's connection state
@@ -69,6 +73,13 @@ PX4. So `prepare_takeoff` sets it before arming, at least `parameter_save_guard_
 change, and waits."""
 TAKEOFF_ALTITUDE_SAME_M = 0.005
 """A takeoff altitude this close to the one set is not set again."""
+TAKEOFF_ATTEMPTS = 2
+"""A takeoff whose vehicle disarmed on its own on the ground (`MavsdkVehicle.takeoff`) is asked again this
+often in all, each time armed again first."""
+
+
+class _DisarmedOnTheGround(Exception):
+    """A takeoff wait saw the vehicle disarmed and on the ground: its takeoff cannot happen."""
 
 
 class MavsdkVehicle(Vehicle):
@@ -105,6 +116,7 @@ class MavsdkVehicle(Vehicle):
         self._in_offboard = False
         self._ground_down_m = math.nan
         self._takeoff_altitude_m = math.nan  # the takeoff altitude last set (PX4 keeps it)
+        self._arm_asked = False  # arm() succeeded since the last disarm() or land()
 
     # --- connection ---------------------------------------------------------------------------
     def connect(self, timeout_s: float | None = None) -> None:
@@ -296,6 +308,7 @@ class MavsdkVehicle(Vehicle):
         self._wait(lambda t: t.armed, max(0.5, deadline.remaining_s()), "arm()", "armed state in telemetry")
         if not math.isfinite(self._ground_down_m):
             self._ground_down_m = self.telemetry().position_ned.down_m
+        self._arm_asked = True
 
     def prepare_takeoff(self, altitude_m: float, timeout_s: float | None = None) -> None:
         """PX4's takeoff altitude (MIS_TAKEOFF_ALT) set before arming, then `PARAMETER_SAVE_S` for PX4's
@@ -324,9 +337,32 @@ class MavsdkVehicle(Vehicle):
             self.sleep(left)
 
     def takeoff(self, altitude_m: float, timeout_s: float | None = None) -> None:
+        """Take off and wait for the climb to end; a vehicle that disarmed on its own before it left the
+        ground is armed again and asked again, once (`TAKEOFF_ATTEMPTS`)."""
         action = self._require(self._action, "takeoff()")
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise ValueError(f"takeoff altitude must be a positive number of metres, got {altitude_m!r}")
+        deadline = Deadline(self, timeout_s or self.config.timeouts.takeoff_s)
+        for attempt in range(1, TAKEOFF_ATTEMPTS + 1):
+            # PX4 disarms COM_DISARM_PRFLT (10) s of its clock after arming without a takeoff: over a lossy
+            # link an arm whose acknowledgements were lost, at "max", can take that long. Only a vehicle
+            # this backend armed is armed again: arming is the caller's decision.
+            if self._arm_asked and (attempt > 1 or not self.telemetry().armed):
+                log.warning("the vehicle disarmed on its own before its takeoff: arming it again")
+                self.arm()
+            self._send_takeoff(action, altitude_m)  # a vehicle that refuses it: CommandDeniedError
+            try:
+                self._wait_for_the_climb(altitude_m, deadline)
+                return
+            except _DisarmedOnTheGround:  # PX4 accepts a takeoff while disarmed, and stays on the ground
+                if not self._arm_asked:
+                    raise CommandDeniedError("takeoff()", "NOT_ARMED", "the vehicle is not armed") from None
+                if attempt == TAKEOFF_ATTEMPTS:
+                    raise CommandDeniedError(
+                        "takeoff()", "DISARMED", f"the vehicle disarmed on the ground {attempt} times"
+                    ) from None
+
+    def _send_takeoff(self, action: Action, altitude_m: float) -> None:
         try:
             with self._pacer.blocked():
                 if not abs(altitude_m - self._takeoff_altitude_m) <= TAKEOFF_ALTITUDE_SAME_M:  # unprepared
@@ -337,20 +373,26 @@ class MavsdkVehicle(Vehicle):
             armed = self.telemetry().armed
             detail = self._last_text() or ("the vehicle is not armed" if not armed else "")
             raise CommandDeniedError(exc.origin, exc.result.name, detail) from None
+
+    def _wait_for_the_climb(self, altitude_m: float, deadline: Deadline) -> None:
+        """Done when PX4 says so (it leaves TAKEOFF for HOLD at the altitude), not merely when the climb is
+        slow: a low takeoff (0.5 m) rises slowly all the way, and was taken for finished 0.3 m short of it.
+
+        Bounded above: PX4 takes every NAV_TAKEOFF it receives (MAVSDK sends its altitude as NaN) as a
+        new takeoff to its current altitude plus MIS_TAKEOFF_ALT (navigator's
+        Takeoff::set_takeoff_position), so when acknowledgements are lost MAVSDK's own copies of the
+        command, 0.5 s of wall time apart (seconds of a fast lockstep's clock), can arrive after liftoff
+        and each climb it higher (once to 6.04 m: docs/px4.md). A vehicle that disarms on the ground
+        (PX4 accepts a takeoff while disarmed, and then never leaves the ground) ends the wait at once."""
         target_m = altitude_m - self.config.altitude_tolerance_m
         limit_m = altitude_m + self.config.takeoff_overshoot_m
 
-        # Done when PX4 says so (it leaves TAKEOFF for HOLD at the altitude), not merely when the
-        # climb is slow: a low takeoff (0.5 m) rises slowly all the way, and was taken for finished
-        # 0.3 m short of it. Bounded above: PX4 takes every NAV_TAKEOFF it receives (MAVSDK sends
-        # its altitude as NaN) as a new takeoff to its current altitude plus MIS_TAKEOFF_ALT
-        # (navigator's Takeoff::set_takeoff_position), so when acknowledgements are lost MAVSDK's own
-        # copies of the command, 0.5 s of wall time apart (seconds of a fast lockstep's clock), can
-        # arrive after liftoff and each climb it higher (once to 6.04 m: docs/px4.md).
         def done(t: Telemetry) -> bool:
             height_m = self._ground_down_m - t.position_ned.down_m
             if height_m > limit_m:
                 raise TakeoffOvershootError("takeoff()", height_m, altitude_m, limit_m)
+            if not t.armed and not t.in_air:
+                raise _DisarmedOnTheGround
             return (
                 t.in_air
                 and t.flight_mode != FlightMode.TAKEOFF
@@ -361,7 +403,7 @@ class MavsdkVehicle(Vehicle):
         try:
             self._wait(
                 done,
-                timeout_s or self.config.timeouts.takeoff_s,
+                max(0.5, deadline.remaining_s()),
                 "takeoff()",
                 f"in-air state, altitude {target_m:.2f} m, the takeoff mode left and the climb ending",
             )
@@ -457,6 +499,7 @@ class MavsdkVehicle(Vehicle):
 
     def land(self, timeout_s: float | None = None) -> None:
         action = self._require(self._action, "land()")
+        self._arm_asked = False  # PX4 disarms after landing
         if self.telemetry().flight_mode == FlightMode.OFFBOARD:
             self.stop_offboard()
         self._in_offboard = False
@@ -489,6 +532,7 @@ class MavsdkVehicle(Vehicle):
 
     def disarm(self, timeout_s: float | None = None) -> None:
         action = self._require(self._action, "disarm()")
+        self._arm_asked = False
         if not self.telemetry().armed:
             return
         try:
