@@ -45,10 +45,13 @@ ACK_RESULTS = {
 class CommandAck:
     """The final COMMAND_ACK of one command: `result` (MAV_RESULT), its name, and `accepted`."""
 
-    def __init__(self, command: int, result: int) -> None:
+    def __init__(self, command: int, result: int, inferred: bool = False) -> None:
         self.command, self.result = command, result
         self.name = ACK_RESULTS.get(result, str(result))
         self.accepted = result == mavlink.MAV_RESULT_ACCEPTED
+        self.inferred = inferred
+        """No acknowledgement came through; the vehicle's state shows the command taken (`command`'s
+        `taken`), so it counts as accepted."""
 
 
 class MavlinkLink:
@@ -133,14 +136,21 @@ class MavlinkLink:
         ack_timeout_s: float = 1.0,
         attempts: int = 3,
         sleep: Callable[[float], None] = time.sleep,
+        taken: Callable[[], bool] | None = None,
     ) -> CommandAck:
         """COMMAND_LONG with up to 7 params, re-sent (confirmation + 1) when unacknowledged; the final ack.
 
         `FlightTimeoutError` naming `origin` when no ack came after every attempt (the link monitor then
         tells a lost link apart: `LinkLostError`). `sleep` waits between polls (the vehicle's clock, so a
-        simulated vehicle keeps running)."""
+        simulated vehicle keeps running). `taken`: whether the vehicle's state already shows the command
+        done (a mode in its heartbeat, its armed state); asked before each resend and before giving up,
+        so a command whose acknowledgement alone was lost is neither sent again nor called a failure
+        (`CommandAck.inferred`)."""
         p = [*params, *([0.0] * (7 - len(params)))]
         for confirmation in range(attempts):
+            if confirmation and taken is not None and taken():
+                log.info("%s: no COMMAND_ACK for command %d, but the vehicle shows it taken", origin, command)
+                return CommandAck(command, mavlink.MAV_RESULT_ACCEPTED, inferred=True)
             with self._acks_cond:
                 self._acks.pop(command, None)
             self.send(
@@ -160,6 +170,9 @@ class MavlinkLink:
                 sleep(0.005)
             log.warning("%s: no COMMAND_ACK for command %d (attempt %d of %d)", origin, command,
                         confirmation + 1, attempts)  # fmt: skip
+        if taken is not None and taken():
+            log.info("%s: no COMMAND_ACK for command %d, but the vehicle shows it taken", origin, command)
+            return CommandAck(command, mavlink.MAV_RESULT_ACCEPTED, inferred=True)
         self.monitor.raise_if_lost(origin)
         raise FlightTimeoutError(origin, ack_timeout_s * attempts, f"COMMAND_ACK for command {command}")
 

@@ -35,6 +35,8 @@ class FakeCopter:
         self.custom_mode, self.armed = COPTER_MODES["STABILIZE"], False
         self.follow_modes = True
         self.results: dict[int, int] = {}
+        self.lost_acks: set[int] = set()  # commands carried out whose COMMAND_ACK never comes (lossy link)
+        self.commands: list[int] = []  # every COMMAND_LONG received, in order
         self.setpoints: list = []
         self.received_signed = 0
         self.received_unsigned = 0
@@ -88,13 +90,16 @@ class FakeCopter:
             self.setpoints.append(msg)
         if msg.get_type() != "COMMAND_LONG":
             return
+        self.commands.append(msg.command)
         result = self.results.get(msg.command, M.MAV_RESULT_ACCEPTED)
+        if msg.command == M.MAV_CMD_NAV_TAKEOFF and not self.armed:
+            result = M.MAV_RESULT_FAILED  # as ArduCopter: no takeoff while disarmed
         if result == M.MAV_RESULT_ACCEPTED:
             if msg.command == M.MAV_CMD_DO_SET_MODE and self.follow_modes:
                 self.custom_mode = int(msg.param2)
             if msg.command == M.MAV_CMD_COMPONENT_ARM_DISARM:
                 self.armed = msg.param1 == 1
-        if msg.command != M.MAV_CMD_SET_MESSAGE_INTERVAL:
+        if msg.command != M.MAV_CMD_SET_MESSAGE_INTERVAL and msg.command not in self.lost_acks:
             self._send(M.MAVLink_command_ack_message(msg.command, result))
 
     def close(self) -> None:
@@ -260,3 +265,52 @@ def test_a_url_is_flown_by_the_backend_its_heartbeat_asks_for() -> None:
     silent = MavlinkVehicle(f"udpin://127.0.0.1:{port}", shown_url="udpin://10.0.0.9:14550")
     with pytest.raises(VehicleConnectionError, match=r"heartbeat on udpin://10.0.0.9:14550 \(relayed to"):
         silent.connect(0.3)
+
+
+def test_a_command_whose_ack_is_lost_counts_once_the_vehicle_shows_it_and_is_not_sent_again() -> None:
+    """Over a lossy link about one exchange in three loses its acknowledgement: a mode the heartbeat
+    shows, or an armed state, is the command taken, not a command to send again or a failure."""
+    port = _free_udp_port()
+    copter = FakeCopter(port)
+    vehicle = _vehicle(port, expected_system_id=42, command_attempts=2)  # a second per attempt
+    try:
+        vehicle.connect()
+        copter.lost_acks = {M.MAV_CMD_DO_SET_MODE, M.MAV_CMD_COMPONENT_ARM_DISARM}
+        vehicle.arm()  # GUIDED, then armed: both seen in the heartbeat
+        assert vehicle.telemetry().armed
+        assert copter.commands.count(M.MAV_CMD_DO_SET_MODE) == 1
+        assert copter.commands.count(M.MAV_CMD_COMPONENT_ARM_DISARM) == 1
+        vehicle.disarm()
+        assert not vehicle.telemetry().armed and copter.commands.count(M.MAV_CMD_COMPONENT_ARM_DISARM) == 2
+        copter.follow_modes = False  # neither acked nor shown: sent `command_attempts` times, then a timeout
+        with pytest.raises(Exception, match="COMMAND_ACK for command 176"):
+            vehicle.land()
+        assert copter.commands.count(M.MAV_CMD_DO_SET_MODE) == 1 + vehicle.config.command_attempts
+    finally:
+        vehicle.close()
+        copter.close()
+
+
+def test_a_copter_that_disarmed_before_its_takeoff_is_armed_and_asked_again_once() -> None:
+    """ArduCopter disarms on its own 10 s after arming without a takeoff, and then refuses the takeoff."""
+    port = _free_udp_port()
+    copter = FakeCopter(port)
+    vehicle = _vehicle(port, expected_system_id=42)
+    try:
+        vehicle.connect()
+        vehicle.arm()
+        copter.armed = False  # DISARM_DELAY ran out
+        time.sleep(0.2)  # a heartbeat shows it
+        with pytest.raises(Exception, match="takeoff"):  # the fake never climbs: the wait times out
+            vehicle.takeoff(1.0, timeout_s=0.5)
+        assert copter.commands.count(M.MAV_CMD_COMPONENT_ARM_DISARM) == 2  # armed again
+        assert copter.commands.count(M.MAV_CMD_NAV_TAKEOFF) == 1  # asked once, armed
+        copter.armed = False
+        time.sleep(0.2)
+        vehicle.disarm()  # the caller's own disarm (nothing to send): from now on, arming is its call again
+        with pytest.raises(CommandDeniedError, match="NOT_ARMED"):
+            vehicle.takeoff(1.0, timeout_s=0.5)
+        assert copter.commands.count(M.MAV_CMD_COMPONENT_ARM_DISARM) == 2
+    finally:
+        vehicle.close()
+        copter.close()

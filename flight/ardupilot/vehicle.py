@@ -63,6 +63,13 @@ _VELOCITY_YAWRATE_MASK = 0b0000_0101_1100_0111  # 1479: use velocity and yaw rat
 READY_REPORT_EVERY_S = 5.0
 DISARM_RACE_WAIT_S = 3.0
 FORCE_DISARM = 21196.0
+TAKEOFF_ATTEMPTS = 2
+"""A takeoff whose vehicle disarmed on its own on the ground is asked again this often in all, armed again
+first (`ArduPilotVehicle.takeoff`)."""
+TAKEOFF_SEEN_M = 0.15
+"""Risen this far off the ground, the vehicle is taking off (a takeoff accepted, its acknowledgement lost)."""
+TAKEOFF_SEEN_WAIT_S = 2.0
+"""After a refused copy of a takeoff: how long (vehicle clock) an earlier, accepted copy may take to show."""
 PACE_EVERY_S = 0.05
 """How often (the vehicle's clock) a wait calls the pacer, well inside a paced simulator's lead (0.1 s)."""
 
@@ -88,6 +95,7 @@ class ArduPilotVehicle(Vehicle):
         self._offboard = False
         self._texts_at_offboard = 0
         self._ground_down_m = math.nan
+        self._arm_asked = False  # arm() succeeded since the last disarm() or land()
         self._stop = threading.Event()
         self._service: threading.Thread | None = None
 
@@ -192,6 +200,7 @@ class ArduPilotVehicle(Vehicle):
         self._offboard = False
         self._setpoint, self._setpoint_set = VelocityBody(), False
         self._ground_down_m = math.nan
+        self._arm_asked = False
 
     # --- telemetry and clock ------------------------------------------------------------------
     def telemetry(self) -> Telemetry:
@@ -253,7 +262,7 @@ class ArduPilotVehicle(Vehicle):
         if self.state.custom_mode != GUIDED:
             self._set_mode("GUIDED", "arm()", max(1.0, deadline.remaining_s()))
         while True:
-            ack = self._command(M.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), "arm()")
+            ack = self._command(M.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), "arm()", taken=self._armed)
             if ack.accepted:
                 break
             if deadline.remaining_s() < self.config.arm_retry_period_s:
@@ -263,17 +272,29 @@ class ArduPilotVehicle(Vehicle):
         self._wait(lambda t: t.armed, max(0.5, deadline.remaining_s()), "arm()", "armed state in telemetry")
         if not math.isfinite(self._ground_down_m):
             self._ground_down_m = self.telemetry().position_ned.down_m
+        self._arm_asked = True
 
     def takeoff(self, altitude_m: float, timeout_s: float | None = None) -> None:
+        """NAV_TAKEOFF in GUIDED, then the climb. ArduCopter disarms on its own `DISARM_DELAY` (10) s of its
+        clock after arming without a takeoff, which an arm whose acknowledgements were lost can outlast at
+        "max": a vehicle this backend armed is armed again and asked again, once (`TAKEOFF_ATTEMPTS`). A
+        refusal of a copy of the command that arrived after the takeoff began is no refusal."""
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise ValueError(f"takeoff altitude must be a positive number of metres, got {altitude_m!r}")
-        if not self.telemetry().armed:
-            raise CommandDeniedError("takeoff()", "NOT_ARMED", "arm first")
-        if self.state.custom_mode != GUIDED:
-            self._set_mode("GUIDED", "takeoff()")
-        ack = self._command(M.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, math.nan, 0, 0, altitude_m), "takeoff()")
-        if not ack.accepted:
-            raise CommandDeniedError("takeoff()", ack.name, self.state.texts.last())
+        for attempt in range(1, TAKEOFF_ATTEMPTS + 1):
+            if not self.telemetry().armed:
+                if not self._arm_asked:  # never armed through this backend: arming is the caller's call
+                    raise CommandDeniedError("takeoff()", "NOT_ARMED", "arm first")
+                log.warning("the vehicle disarmed on its own before its takeoff: arming it again")
+                self.arm()
+            if self.state.custom_mode != GUIDED:
+                self._set_mode("GUIDED", "takeoff()")
+            params = (0, 0, 0, math.nan, 0, 0, altitude_m)
+            ack = self._command(M.MAV_CMD_NAV_TAKEOFF, params, "takeoff()", taken=self._taking_off)
+            if ack.accepted or self._taking_off_soon():
+                break
+            if self.telemetry().armed or not self._arm_asked or attempt == TAKEOFF_ATTEMPTS:
+                raise CommandDeniedError("takeoff()", ack.name, self.state.texts.last())
         target_m = altitude_m - self.config.altitude_tolerance_m
         self._wait(
             lambda t: (
@@ -286,6 +307,23 @@ class ArduPilotVehicle(Vehicle):
             f"in-air state, altitude {target_m:.2f} m and the climb ending",
         )
         self._set_mode(self.config.hold_mode, "takeoff()")
+
+    def _armed(self) -> bool:
+        return self.telemetry().armed
+
+    def _taking_off(self) -> bool:
+        """Whether the vehicle shows a takeoff under way: in the air, or risen off the ground."""
+        t = self.telemetry()
+        return t.in_air or self._ground_down_m - t.position_ned.down_m > TAKEOFF_SEEN_M
+
+    def _taking_off_soon(self) -> bool:
+        """After a refusal: whether an earlier copy of the takeoff, accepted with its acknowledgement lost,
+        shows within `TAKEOFF_SEEN_WAIT_S` of the vehicle's clock."""
+        try:
+            self._wait(lambda t: not t.armed or self._taking_off(), TAKEOFF_SEEN_WAIT_S, "takeoff()", "climb")
+        except FlightTimeoutError:
+            return False
+        return self._taking_off()
 
     def set_velocity_body(self, velocity: VelocityBody) -> None:
         self._require_link("set_velocity_body()")
@@ -336,6 +374,7 @@ class ArduPilotVehicle(Vehicle):
 
     def land(self, timeout_s: float | None = None) -> None:
         self._offboard = False
+        self._arm_asked = False  # ArduCopter disarms after landing
         self._set_mode("LAND", "land()")
         self._wait(
             lambda t: not t.in_air or not t.armed,
@@ -345,9 +384,11 @@ class ArduPilotVehicle(Vehicle):
         )
 
     def disarm(self, timeout_s: float | None = None) -> None:
+        self._arm_asked = False
         if not self.telemetry().armed:
             return
-        ack = self._command(M.MAV_CMD_COMPONENT_ARM_DISARM, (0.0,), "disarm()")
+        disarmed = lambda: not self._armed()  # noqa: E731
+        ack = self._command(M.MAV_CMD_COMPONENT_ARM_DISARM, (0.0,), "disarm()", taken=disarmed)
         if not ack.accepted:
             try:  # ArduPilot's own disarm after landing may have won the race
                 self._wait(lambda t: not t.armed, DISARM_RACE_WAIT_S, "disarm()", "disarmed state")
@@ -372,7 +413,8 @@ class ArduPilotVehicle(Vehicle):
         timeout_s = timeout_s or self.config.timeouts.mode_change_s
         if self.state.custom_mode != number:
             flag = float(M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
-            ack = self._command(M.MAV_CMD_DO_SET_MODE, (flag, float(number)), origin)
+            in_mode = lambda: self.state.custom_mode == number  # noqa: E731
+            ack = self._command(M.MAV_CMD_DO_SET_MODE, (flag, float(number)), origin, taken=in_mode)
             if not ack.accepted:
                 raise CommandDeniedError(origin, ack.name, f"mode {name}: {self.state.texts.last()!r}")
         deadline = Deadline(self, timeout_s)
@@ -383,9 +425,14 @@ class ArduPilotVehicle(Vehicle):
             self._require_link(origin).monitor.check(origin)
             self.sleep(self.config.poll_s)
 
-    def _command(self, command: int, params: tuple[float, ...], origin: str) -> CommandAck:
+    def _command(
+        self, command: int, params: tuple[float, ...], origin: str, taken: Callable[[], bool] | None = None
+    ) -> CommandAck:
+        """COMMAND_LONG, sent up to `command_attempts` times; `taken`: see `MavlinkLink.command`."""
         with self._pacer.blocked():
-            return self._require_link(origin).command(*self._target, command, params, origin=origin)
+            link = self._require_link(origin)
+            attempts = self.config.command_attempts
+            return link.command(*self._target, command, params, origin=origin, attempts=attempts, taken=taken)
 
     def _require_link(self, origin: str) -> MavlinkLink:
         if self._link is None:
