@@ -36,6 +36,9 @@ class FakeCopter:
         self.follow_modes = True
         self.results: dict[int, int] = {}
         self.lost_acks: set[int] = set()  # commands carried out whose COMMAND_ACK never comes (lossy link)
+        self.lose_next_ack: set[int] = set()  # the next COMMAND_ACK of these only
+        self.climb_after_s: float | None = None  # a takeoff: in the air at its altitude this long after it
+        self._takeoff: tuple[float, float] | None = None  # (when accepted, altitude)
         self.commands: list[int] = []  # every COMMAND_LONG received, in order
         self.setpoints: list = []
         self.received_signed = 0
@@ -73,6 +76,14 @@ class FakeCopter:
                     M.MAV_TYPE_QUADROTOR, self.autopilot, base, self.custom_mode, M.MAV_STATE_STANDBY, 3
                 ))  # fmt: skip
                 self._send(M.MAVLink_attitude_message(int((now - t0) * 1000), 0, 0, 0, 0, 0, 0))
+                if self.climb_after_s is not None:
+                    flying = self._takeoff is not None and now - self._takeoff[0] >= self.climb_after_s
+                    up_m = self._takeoff[1] if flying and self._takeoff is not None else 0.0
+                    self._send(
+                        M.MAVLink_local_position_ned_message(int((now - t0) * 1000), 0, 0, -up_m, 0, 0, 0)
+                    )
+                    landed = M.MAV_LANDED_STATE_IN_AIR if flying else M.MAV_LANDED_STATE_ON_GROUND
+                    self._send(M.MAVLink_extended_sys_state_message(0, landed))
             try:
                 data = self._sock.recv(65536)
             except OSError:
@@ -92,14 +103,18 @@ class FakeCopter:
             return
         self.commands.append(msg.command)
         result = self.results.get(msg.command, M.MAV_RESULT_ACCEPTED)
-        if msg.command == M.MAV_CMD_NAV_TAKEOFF and not self.armed:
-            result = M.MAV_RESULT_FAILED  # as ArduCopter: no takeoff while disarmed
+        if msg.command == M.MAV_CMD_NAV_TAKEOFF and (not self.armed or self._takeoff is not None):
+            result = M.MAV_RESULT_FAILED  # as ArduCopter: no takeoff while disarmed, or once one began
+        elif msg.command == M.MAV_CMD_NAV_TAKEOFF:
+            self._takeoff = (time.monotonic(), msg.param7)
         if result == M.MAV_RESULT_ACCEPTED:
             if msg.command == M.MAV_CMD_DO_SET_MODE and self.follow_modes:
                 self.custom_mode = int(msg.param2)
             if msg.command == M.MAV_CMD_COMPONENT_ARM_DISARM:
                 self.armed = msg.param1 == 1
-        if msg.command != M.MAV_CMD_SET_MESSAGE_INTERVAL and msg.command not in self.lost_acks:
+        if msg.command in self.lose_next_ack:
+            self.lose_next_ack.discard(msg.command)
+        elif msg.command != M.MAV_CMD_SET_MESSAGE_INTERVAL and msg.command not in self.lost_acks:
             self._send(M.MAVLink_command_ack_message(msg.command, result))
 
     def close(self) -> None:
@@ -311,6 +326,25 @@ def test_a_copter_that_disarmed_before_its_takeoff_is_armed_and_asked_again_once
         with pytest.raises(CommandDeniedError, match="NOT_ARMED"):
             vehicle.takeoff(1.0, timeout_s=0.5)
         assert copter.commands.count(M.MAV_CMD_COMPONENT_ARM_DISARM) == 2
+    finally:
+        vehicle.close()
+        copter.close()
+
+
+def test_a_refused_copy_of_a_takeoff_already_under_way_is_no_refusal() -> None:
+    """The first NAV_TAKEOFF is taken but its acknowledgement lost; the copy sent a second later is refused
+    (ArduCopter refuses a takeoff once one began), and the vehicle climbs: the takeoff goes on."""
+    port = _free_udp_port()
+    copter = FakeCopter(port)
+    copter.climb_after_s = 1.5  # slower than one ack timeout: the copy goes out before the climb shows
+    vehicle = _vehicle(port, expected_system_id=42)
+    try:
+        vehicle.connect()
+        vehicle.arm()
+        copter.lose_next_ack = {M.MAV_CMD_NAV_TAKEOFF}
+        vehicle.takeoff(1.0, timeout_s=5.0)
+        assert copter.commands.count(M.MAV_CMD_NAV_TAKEOFF) == 2
+        assert vehicle.telemetry().in_air
     finally:
         vehicle.close()
         copter.close()
