@@ -27,7 +27,7 @@ from sim_world.physics.autopilot import Autopilot, AutopilotParams
 from sim_world.physics.quadrotor import GRAVITY_M_S2, Quadrotor, QuadrotorParams, RigidBodyState
 from sim_world.physics.rangefinder import RangefinderConfig, forward_range_m
 from sim_world.physics.wind import Wind
-from sim_world.rendering.camera import CameraConfig, ForwardCamera, Render
+from sim_world.rendering.camera import CameraConfig, ForwardCamera, Render, add_gaussian_noise
 from sim_world.scene.builder import Scene, SceneTarget
 from sim_world.scene.config import DEFAULT_SCENE, SceneConfig
 from sim_world.scene.target_truth import TargetTruth, target_truth
@@ -135,20 +135,29 @@ class World:
         """Advance simulated time by `seconds` (rounded to whole physics steps)."""
         self.step(max(0, round(seconds / self.dt_s)))
 
-    def render(self, with_seg: bool = True, rng: np.random.Generator | None = None) -> Render:
+    def render(
+        self, with_seg: bool = True, rng: np.random.Generator | None = None, noise: bool = True
+    ) -> Render:
         """The forward camera's image of the current state, with the scene's lighting and noise.
 
         Noise comes from the world's seeded stream unless `rng` is given (data
         collection passes one per image, so an image does not depend on the ones before).
+        `noise=False`: the picture without it, for `add_noise` to add afresh to each copy.
         """
         return self.camera.render(
             self.client_id,
             self.drone.state(),
             lighting=self.scene.lighting,
-            noise_std=self.scene.camera_noise_std,
+            noise_std=self.scene.camera_noise_std if noise else 0.0,
             rng=self.noise_rng if rng is None else rng,
             with_seg=with_seg,
         )
+
+    def add_noise(self, rgb: np.ndarray) -> np.ndarray:
+        """`rgb` (a `render(noise=False)` picture) with the scene's camera noise from the world's stream: a
+        new draw each call, as a camera's sensor gives each frame of a scene that stands still."""
+        std = self.scene.camera_noise_std
+        return add_gaussian_noise(rgb, std, self.noise_rng) if std > 0.0 else rgb
 
     def target_truth(self, render: Render | None = None) -> TargetTruth:
         """Where the named target is in the image, from geometry (and its pixel count, given a render)."""

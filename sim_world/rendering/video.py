@@ -214,23 +214,33 @@ class _Scene:
         self.rng = random.Random(self.faults.seed)
         self.extremes = TruthExtremes()
         self.frozen: np.ndarray | None = None
+        self.renders = 0
+        self._drawn: tuple[list[float], np.ndarray, dict[str, Any]] | None = None  # pose, picture, truth
 
     def draw(self, values: list[float], server: MjpegServer) -> bool:
         """Render the drone at `values` (the shared pose) and publish it with its truth (faults applied);
-        False once the injected fault says the stream dies."""
+        False once the injected fault says the stream dies.
+
+        A pose the last frame showed (the same position, attitude and simulated time: a lockstep that
+        stands still while its client reads and plans) is not drawn again: the picture drawn for it is
+        published with fresh camera noise, as a camera gives each frame of a scene that stands still."""
         world = self.world
-        p.resetBasePositionAndOrientation(
-            world.drone.body_id, values[0:3], values[3:7], physicsClientId=world.client_id
-        )
-        render = world.render(with_seg=True)
-        truth = frame_truth(world, render, values, self.origin_enu_m)
-        self.extremes.update(truth["drone"]["position_ned_m"], truth["drone"]["velocity_ned_m_s"])
-        truth["extremes"] = self.extremes.as_dict()
+        if self._drawn is None or self._drawn[0] != values:
+            p.resetBasePositionAndOrientation(
+                world.drone.body_id, values[0:3], values[3:7], physicsClientId=world.client_id
+            )
+            render = world.render(with_seg=True, noise=False)
+            truth = frame_truth(world, render, values, self.origin_enu_m)
+            self.extremes.update(truth["drone"]["position_ned_m"], truth["drone"]["velocity_ned_m_s"])
+            truth["extremes"] = self.extremes.as_dict()
+            self._drawn = (list(values), render.rgb, truth)
+            self.renders += 1
+        _, clean, truth = self._drawn
         sim_s, faults = values[10], self.faults
         if faults.dies_at_s is not None and sim_s >= faults.dies_at_s:
             log.warning("video: the stream dies at %.1f s (injected fault)", sim_s)
             return False
-        image = render.rgb
+        image = world.add_noise(clean)
         if faults.freeze_at_s is not None and 0 <= sim_s - faults.freeze_at_s < faults.freeze_for_s:
             self.frozen = image if self.frozen is None else self.frozen
             image = self.frozen
