@@ -148,9 +148,6 @@ class MavlinkLink:
         (`CommandAck.inferred`)."""
         p = [*params, *([0.0] * (7 - len(params)))]
         for confirmation in range(attempts):
-            if confirmation and taken is not None and taken():
-                log.info("%s: no COMMAND_ACK for command %d, but the vehicle shows it taken", origin, command)
-                return CommandAck(command, mavlink.MAV_RESULT_ACCEPTED, inferred=True)
             with self._acks_cond:
                 self._acks.pop(command, None)
             self.send(
@@ -170,9 +167,9 @@ class MavlinkLink:
                 sleep(0.005)
             log.warning("%s: no COMMAND_ACK for command %d (attempt %d of %d)", origin, command,
                         confirmation + 1, attempts)  # fmt: skip
-        if taken is not None and taken():
-            log.info("%s: no COMMAND_ACK for command %d, but the vehicle shows it taken", origin, command)
-            return CommandAck(command, mavlink.MAV_RESULT_ACCEPTED, inferred=True)
+            if taken is not None and taken():  # before a resend, and before giving up
+                log.info("%s: command %d shows taken: its acknowledgement alone was lost", origin, command)
+                return CommandAck(command, mavlink.MAV_RESULT_ACCEPTED, inferred=True)
         self.monitor.raise_if_lost(origin)
         raise FlightTimeoutError(origin, ack_timeout_s * attempts, f"COMMAND_ACK for command {command}")
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 import socket
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
@@ -134,6 +136,19 @@ def _vehicle(port: int, **config) -> ArduPilotVehicle:  # type: ignore[no-untype
     return ArduPilotVehicle(ArduPilotConfig(url=f"udpin://127.0.0.1:{port}", timeouts=timeouts, **config))
 
 
+@contextmanager
+def _copter_and_vehicle(**config) -> Iterator[tuple[FakeCopter, ArduPilotVehicle]]:  # type: ignore[no-untyped-def]
+    """A `FakeCopter` (system 42) on a free port and a backend for it, not yet connected; both closed."""
+    port = _free_udp_port()
+    copter = FakeCopter(port)
+    vehicle = _vehicle(port, expected_system_id=42, **config)
+    try:
+        yield copter, vehicle
+    finally:
+        vehicle.close()
+        copter.close()
+
+
 def test_arducopter_modes_map_to_the_flight_interfaces_as_mavsdk_reports_them() -> None:
     assert flight_mode_of(COPTER_MODES["GUIDED"]) == FlightMode.OFFBOARD
     assert flight_mode_of(COPTER_MODES["BRAKE"]) == flight_mode_of(COPTER_MODES["LOITER"]) == FlightMode.HOLD
@@ -184,10 +199,7 @@ def test_it_flies_only_the_arducopter_it_was_told_to() -> None:
 
 
 def test_a_mode_counts_when_the_heartbeat_shows_it_and_a_refusal_names_ardupilots_reason() -> None:
-    port = _free_udp_port()
-    copter = FakeCopter(port)
-    vehicle = _vehicle(port, expected_system_id=42)
-    try:
+    with _copter_and_vehicle() as (copter, vehicle):
         vehicle.connect()
         copter.results[M.MAV_CMD_COMPONENT_ARM_DISARM] = M.MAV_RESULT_FAILED
         copter.text("PreArm: Need Position Estimate")
@@ -200,16 +212,10 @@ def test_a_mode_counts_when_the_heartbeat_shows_it_and_a_refusal_names_ardupilot
         copter.follow_modes = False  # acks DO_SET_MODE but stays in GUIDED
         with pytest.raises(ModeChangeError, match=r"wanted BRAKE, telemetry still shows GUIDED"):
             vehicle.stop_offboard()
-    finally:
-        vehicle.close()
-        copter.close()
 
 
 def test_offboard_needs_a_setpoint_then_streams_body_velocities_until_stopped() -> None:
-    port = _free_udp_port()
-    copter = FakeCopter(port)
-    vehicle = _vehicle(port, expected_system_id=42, setpoint_period_s=0.02)
-    try:
+    with _copter_and_vehicle(setpoint_period_s=0.02) as (copter, vehicle):
         vehicle.connect()
         with pytest.raises(CommandDeniedError, match="NO_SETPOINT_SET"):
             vehicle.start_offboard()
@@ -232,9 +238,6 @@ def test_offboard_needs_a_setpoint_then_streams_body_velocities_until_stopped() 
         stopped = len(copter.setpoints)
         time.sleep(0.2)
         assert len(copter.setpoints) == stopped
-    finally:
-        vehicle.close()
-        copter.close()
 
 
 def test_with_a_signing_key_every_frame_is_signed_and_unsigned_ones_are_dropped() -> None:
@@ -285,10 +288,7 @@ def test_a_url_is_flown_by_the_backend_its_heartbeat_asks_for() -> None:
 def test_a_command_whose_ack_is_lost_counts_once_the_vehicle_shows_it_and_is_not_sent_again() -> None:
     """Over a lossy link about one exchange in three loses its acknowledgement: a mode the heartbeat
     shows, or an armed state, is the command taken, not a command to send again or a failure."""
-    port = _free_udp_port()
-    copter = FakeCopter(port)
-    vehicle = _vehicle(port, expected_system_id=42, command_attempts=2)  # a second per attempt
-    try:
+    with _copter_and_vehicle(command_attempts=2) as (copter, vehicle):
         vehicle.connect()
         copter.lost_acks = {M.MAV_CMD_DO_SET_MODE, M.MAV_CMD_COMPONENT_ARM_DISARM}
         vehicle.arm()  # GUIDED, then armed: both seen in the heartbeat
@@ -301,17 +301,11 @@ def test_a_command_whose_ack_is_lost_counts_once_the_vehicle_shows_it_and_is_not
         with pytest.raises(Exception, match="COMMAND_ACK for command 176"):
             vehicle.land()
         assert copter.commands.count(M.MAV_CMD_DO_SET_MODE) == 1 + vehicle.config.command_attempts
-    finally:
-        vehicle.close()
-        copter.close()
 
 
 def test_a_copter_that_disarmed_before_its_takeoff_is_armed_and_asked_again_once() -> None:
     """ArduCopter disarms on its own 10 s after arming without a takeoff, and then refuses the takeoff."""
-    port = _free_udp_port()
-    copter = FakeCopter(port)
-    vehicle = _vehicle(port, expected_system_id=42)
-    try:
+    with _copter_and_vehicle() as (copter, vehicle):
         vehicle.connect()
         vehicle.arm()
         copter.armed = False  # DISARM_DELAY ran out
@@ -326,25 +320,16 @@ def test_a_copter_that_disarmed_before_its_takeoff_is_armed_and_asked_again_once
         with pytest.raises(CommandDeniedError, match="NOT_ARMED"):
             vehicle.takeoff(1.0, timeout_s=0.5)
         assert copter.commands.count(M.MAV_CMD_COMPONENT_ARM_DISARM) == 2
-    finally:
-        vehicle.close()
-        copter.close()
 
 
 def test_a_refused_copy_of_a_takeoff_already_under_way_is_no_refusal() -> None:
     """The first NAV_TAKEOFF is taken but its acknowledgement lost; the copy sent a second later is refused
     (ArduCopter refuses a takeoff once one began), and the vehicle climbs: the takeoff goes on."""
-    port = _free_udp_port()
-    copter = FakeCopter(port)
-    copter.climb_after_s = 1.5  # slower than one ack timeout: the copy goes out before the climb shows
-    vehicle = _vehicle(port, expected_system_id=42)
-    try:
+    with _copter_and_vehicle() as (copter, vehicle):
+        copter.climb_after_s = 1.5  # slower than one ack timeout: the copy goes out before the climb shows
         vehicle.connect()
         vehicle.arm()
         copter.lose_next_ack = {M.MAV_CMD_NAV_TAKEOFF}
         vehicle.takeoff(1.0, timeout_s=5.0)
         assert copter.commands.count(M.MAV_CMD_NAV_TAKEOFF) == 2
         assert vehicle.telemetry().in_air
-    finally:
-        vehicle.close()
-        copter.close()
