@@ -24,6 +24,11 @@ from types import TracebackType
 from flight.errors import CommandDeniedError, FlightTimeoutError
 from flight.types import Telemetry, VelocityBody
 
+TAKEOFF_ATTEMPTS = 2
+"""A MAVLink backend's takeoff whose vehicle disarmed on its own on the ground (PX4's COM_DISARM_PRFLT,
+ArduCopter's DISARM_DELAY: 10 s after arming without a takeoff) is asked this often in all, the vehicle
+armed again first, where the backend armed it."""
+
 
 class Vehicle(abc.ABC):
     """A multicopter commanded with body-frame velocity setpoints in offboard mode."""

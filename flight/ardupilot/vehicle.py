@@ -50,7 +50,7 @@ from flight.errors import (
 from flight.pacing import Pacer
 from flight.pymavlink_link import CommandAck, MavlinkLink
 from flight.types import FlightMode, Telemetry, VelocityBody
-from flight.vehicle import Deadline, Vehicle, wait_for
+from flight.vehicle import TAKEOFF_ATTEMPTS, Deadline, Vehicle, wait_for
 
 log = logging.getLogger(__name__)
 
@@ -63,9 +63,6 @@ _VELOCITY_YAWRATE_MASK = 0b0000_0101_1100_0111  # 1479: use velocity and yaw rat
 READY_REPORT_EVERY_S = 5.0
 DISARM_RACE_WAIT_S = 3.0
 FORCE_DISARM = 21196.0
-TAKEOFF_ATTEMPTS = 2
-"""A takeoff whose vehicle disarmed on its own on the ground is asked again this often in all, armed again
-first (`ArduPilotVehicle.takeoff`)."""
 TAKEOFF_SEEN_M = 0.15
 """Risen this far off the ground, the vehicle is taking off (a takeoff accepted, its acknowledgement lost)."""
 TAKEOFF_SEEN_WAIT_S = 2.0

@@ -54,7 +54,7 @@ from flight.errors import (
 from flight.mavsdk.link import MavsdkConfig, TelemetryCache, resend_on_timeout, route_mavsdk_logs
 from flight.pacing import Pacer
 from flight.types import Closable, FlightMode, Telemetry, VelocityBody
-from flight.vehicle import Deadline, Vehicle, wait_for
+from flight.vehicle import TAKEOFF_ATTEMPTS, Deadline, Vehicle, wait_for
 
 log = logging.getLogger(__name__)
 
@@ -73,9 +73,6 @@ PX4. So `prepare_takeoff` sets it before arming, at least `parameter_save_guard_
 change, and waits."""
 TAKEOFF_ALTITUDE_SAME_M = 0.005
 """A takeoff altitude this close to the one set is not set again."""
-TAKEOFF_ATTEMPTS = 2
-"""A takeoff whose vehicle disarmed on its own on the ground (`MavsdkVehicle.takeoff`) is asked again this
-often in all, each time armed again first."""
 
 
 class _DisarmedOnTheGround(Exception):
