@@ -14,10 +14,11 @@ SimSpeed = float | Literal["max"]
 """Simulated seconds per wall second, or "max": physics as fast as the loop thread steps it."""
 
 OFF_REAL_TIME_FRESH_FRAME_S = 0.1
-"""A simulator off real time: a picture taken "now" is the first frame that arrives this long (wall time)
-after now. Render, JPEG and HTTP take a few tens of ms of wall time, more on a loaded machine, which at
-×8 or "max" are tenths of a simulated second: a frame arriving at once can show the drone before it
-stopped (a flown collection once labelled such a frame 19 px from the truth)."""
+"""A simulator off real time: a picture taken "now" is the first frame whose scene stamp is at or after
+now (`drone_inspect_core.video_stamps`), or from a camera that stamps nothing, the first that arrives
+this long (wall time) after now. Render, JPEG and HTTP take a few tens of ms of wall time, more on a
+loaded machine, which at ×8 or "max" are tenths of a simulated second: a frame arriving at once can show
+the drone before it stopped (a flown collection once labelled such a frame 19 px from the truth)."""
 
 
 def off_real_time(speed: SimSpeed | str | None) -> bool:

@@ -41,9 +41,12 @@ class SimCamera(Camera):
         """Render now (rendering cannot stall, so the timeout is not needed)."""
         if self._closed:
             raise CameraClosedError("sim", "read() after close()")
+        shown_s = time.monotonic()  # the world stands still while it renders in this thread
         render = self._world.render(with_seg=self._with_seg)
         self.last_render = render
-        frame = Frame(image=render.rgb, timestamp_s=time.monotonic(), frame_number=self._frames)
+        frame = Frame(
+            image=render.rgb, timestamp_s=time.monotonic(), frame_number=self._frames, scene_s=shown_s
+        )
         self._frames += 1
         return frame
 

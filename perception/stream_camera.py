@@ -15,6 +15,11 @@ A live source that drops (video links do) is reopened by the reader until it
 comes back or the camera is closed; meanwhile `read()` raises `CameraTimeoutError`
 saying so. A video file ends with `CameraStreamEndedError`.
 
+A simulator's own stream, read with `scene_stamps=True`, is read part by part
+(`perception.mjpeg_http`, each JPEG still decoded by OpenCV) so that each frame
+keeps the scene stamp its render process sent (`Frame.scene_s`); FFmpeg's reader
+drops it.
+
 Every wait is bounded: opening (OpenCV's CAP_PROP_OPEN_TIMEOUT_MSEC plus a join
 timeout, since some backends ignore it), each decode (CAP_PROP_READ_TIMEOUT_MSEC),
 `read()` and `close()`.
@@ -31,6 +36,7 @@ import cv2
 
 from perception.camera import Camera
 from perception.errors import CameraOpenError, CameraStreamEndedError
+from perception.mjpeg_http import MjpegHttpCapture
 from perception.newest_frame import NewestFrame
 from perception.types import Frame
 
@@ -57,6 +63,8 @@ class StreamCamera(Camera):
     `realtime_file`: pace a video file at its frame rate (True) or decode it as fast
     as possible (False; then `read()` skips whatever the reader outran).
     `reconnect`: reopen a live source after it drops (False: `CameraStreamEndedError`).
+    `scene_stamps`: the source is an http:// MJPEG stream of a simulator on this host; its parts'
+    scene stamps are this host's clock and become `Frame.scene_s` (see `drone_inspect_core.video_stamps`).
     """
 
     def __init__(
@@ -66,6 +74,7 @@ class StreamCamera(Camera):
         open_timeout_s: float = 5.0,
         realtime_file: bool = True,
         reconnect: bool = True,
+        scene_stamps: bool = False,
     ) -> None:
         if timeout_s <= 0 or open_timeout_s <= 0:
             raise ValueError(
@@ -77,6 +86,10 @@ class StreamCamera(Camera):
         self.name = describe_source(source)
         self.timeout_s = timeout_s
         self._is_file = isinstance(source, str) and "://" not in source
+        if scene_stamps and not (isinstance(source, str) and source.startswith("http://")):
+            raise ValueError(f"scene stamps come only with an http:// MJPEG stream, not {self.name}")
+        self._scene_stamps = scene_stamps
+        self._open_error: str | None = None
         if self._is_file and not Path(str(source)).is_file():
             raise CameraOpenError(self.name, "no such video file")
         live_file = self._is_file and str(source).lower().endswith(".sdp")  # an RTP session description
@@ -98,10 +111,12 @@ class StreamCamera(Camera):
             self._stop.set()
             raise CameraOpenError(self.name, f"did not open within {open_timeout_s:.3g} s; {_OPEN_HINT}")
         if self._open_failed:
-            raise CameraOpenError(self.name, _OPEN_HINT)
+            raise CameraOpenError(self.name, self._open_error or _OPEN_HINT)
         log.info("camera %s open", self.name)
 
-    def _capture(self) -> cv2.VideoCapture:
+    def _capture(self) -> cv2.VideoCapture | MjpegHttpCapture:
+        if self._scene_stamps:
+            return MjpegHttpCapture(str(self.source), self._open_timeout_s, self.timeout_s)
         if isinstance(self.source, int):
             return cv2.VideoCapture(self.source, cv2.CAP_ANY)
         params = [
@@ -122,6 +137,8 @@ class StreamCamera(Camera):
                     if not cap.isOpened():
                         if not self._opened.is_set():  # the first open: the constructor reports it
                             self._open_failed = True
+                            if isinstance(cap, MjpegHttpCapture):
+                                self._open_error = f"{cap.error}; is the simulator's stream up?"
                             return
                         self._stop.wait(_RECONNECT_BACKOFF_S)
                         continue
@@ -149,7 +166,7 @@ class StreamCamera(Camera):
         finally:
             self._opened.set()
 
-    def _decode(self, cap: cv2.VideoCapture, number: int) -> int:
+    def _decode(self, cap: cv2.VideoCapture | MjpegHttpCapture, number: int) -> int:
         """Decode frames until the source fails or `close()`; returns the next frame number."""
         fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0)
         period_s = 1.0 / fps if self._pace and 0.0 < fps < 1000.0 else 0.0
@@ -158,7 +175,8 @@ class StreamCamera(Camera):
             ok, bgr = cap.read()
             if not ok or bgr is None:
                 break
-            frame = Frame(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), time.monotonic(), number)
+            scene_s = cap.scene_s if isinstance(cap, MjpegHttpCapture) else None
+            frame = Frame(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), time.monotonic(), number, scene_s)
             number += 1
             with self._cond:
                 self._frames.put(frame)

@@ -15,12 +15,16 @@ class Frame:
     came into hand (the reader thread's arrival time for a stream, the render time
     for the simulated camera), so `time.monotonic() - frame.timestamp_s` is its age.
     `frame_number` counts the frames this camera received, from 0; gaps mean frames
-    were skipped to stay on the newest one.
+    were skipped to stay on the newest one. `scene_s`, when the source says it, is the
+    `time.monotonic()` of this host at which the scene shown was current (a simulator's
+    render process stamps each frame with when it read the pose it drew); None when
+    unknown, as from any real camera.
     """
 
     image: np.ndarray
     timestamp_s: float
     frame_number: int
+    scene_s: float | None = None
 
     @property
     def width(self) -> int:

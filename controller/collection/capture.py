@@ -19,7 +19,7 @@ from tqdm import tqdm
 
 from controller.collection.config import FlownCollectConfig
 from controller.collection.goal import GoalRecord
-from controller.collection.goal_flight import fresh_frame
+from controller.collection.goal_flight import FRAME_WAIT_S
 from controller.collection.labels import LabelMaker
 from controller.collection.plan import PlannedCapture
 from controller.collection.pose_flight import PoseControl, fly_to, pose_of
@@ -31,6 +31,7 @@ from flight.safety import safe_stop
 from flight.vehicle import Vehicle
 from perception.camera import Camera
 from perception.errors import CameraError
+from perception.fresh_frame import read_fresh
 
 log = logging.getLogger(__name__)
 
@@ -189,14 +190,14 @@ def read_or_wait(vehicle: Vehicle, camera: Camera, config: FlownCollectConfig) -
     """A frame that arrived once settled (`FlownCollectConfig.frame_lag_s` after);
     a camera that sends nothing is waited for `loss_wait_s` (holding), then `CameraLostError`."""
     try:
-        return fresh_frame(camera, time.monotonic() + config.frame_lag_s)
+        return read_fresh(camera, time.monotonic(), config.frame_lag_s, FRAME_WAIT_S)
     except CameraError as exc:
         log.warning("camera: %s; holding and waiting %.0f s for it", exc, config.loss_wait_s)
         vehicle.hold()
         give_up = time.monotonic() + config.loss_wait_s
         while time.monotonic() < give_up:
             try:
-                return fresh_frame(camera, time.monotonic(), timeout_s=1.0)
+                return read_fresh(camera, time.monotonic(), 0.0, 1.0)
             except CameraError:
                 vehicle.sleep(0.1)
         raise CameraLostError(str(exc)) from None

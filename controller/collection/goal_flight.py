@@ -33,6 +33,7 @@ from flight.types import VelocityBody
 from flight.vehicle import Vehicle
 from perception.camera import Camera
 from perception.camera_model import CameraModel, PoseNed
+from perception.fresh_frame import read_fresh
 from perception.target_tracker import TemplateTracker
 from perception.types import Frame
 
@@ -40,6 +41,8 @@ log = logging.getLogger(__name__)
 
 SAMPLE_S = 0.6
 """How long the goal pose and the rangefinder are averaged over."""
+FRAME_WAIT_S = 3.0
+"""How long a picture taken once settled is waited for (`perception.fresh_frame.read_fresh`)."""
 CENTRING_MOVES = 3
 DETECTOR_FRAMES = 3
 """Frames the detector is tried on before the goal box must be given (`--goal-box`)."""
@@ -47,17 +50,6 @@ DETECTOR_FRAMES = 3
 
 class GoalError(RuntimeError):
     """The goal cannot be recorded or reached (the message says what to do)."""
-
-
-def fresh_frame(camera: Camera, after_s: float, timeout_s: float = 3.0) -> Frame:
-    """The first frame that arrived after `after_s` (time.monotonic()): a picture taken once settled."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        frame = camera.read(timeout_s=max(0.1, deadline - time.monotonic()))
-        if frame.timestamp_s >= after_s:
-            return frame
-        if time.monotonic() > deadline:
-            return frame  # the stream is slow but alive: the newest frame is still taken after settling
 
 
 def take_offboard_here(vehicle: Vehicle) -> None:
@@ -136,7 +128,7 @@ def record_goal(
     if not settled:
         log.warning("not settled at the goal within %.0f s: recording it as it is", config.settling.timeout_s)
     pose, range_m = sample_goal_pose(vehicle)
-    frame = fresh_frame(camera, time.monotonic() + config.frame_lag_s)
+    frame = read_fresh(camera, time.monotonic(), config.frame_lag_s, FRAME_WAIT_S)
     if (frame.width, frame.height) != (model.width, model.height):
         raise GoalError(
             f"the camera sends {frame.width}x{frame.height} px images, the camera model says "
@@ -166,7 +158,7 @@ def record_goal(
                     f"read the target's box off it and fly from it: --goal {path} --goal-box x,y,w,h"
                 ) from None
             log.info("no %s detected in the goal frame: trying the next frame", config.kind)
-            frame = fresh_frame(camera, time.monotonic() + config.frame_lag_s)
+            frame = read_fresh(camera, time.monotonic(), config.frame_lag_s, FRAME_WAIT_S)
     goal = GoalRecord(
         pose, box, depth, source, box_source, config.kind, (frame.width, frame.height), frame.image
     )
@@ -213,7 +205,7 @@ def verify_goal(
     """At the goal pose of an earlier flight: the target must be where the goal image had it. Returns the
     tracked offset (`GoalError` when it is not found, or too far from the goal image's)."""
     assert goal.image is not None
-    frame = fresh_frame(camera, time.monotonic() + lag_s)
+    frame = read_fresh(camera, time.monotonic(), lag_s, FRAME_WAIT_S)
     tracker = TemplateTracker(goal.image, goal.box_px)
     du0, dv0 = goal.offset_px
     width, height = model.width, model.height
@@ -254,7 +246,7 @@ def centre_goal(
     def seen_here() -> tuple[PoseNed, Frame, tuple[float, float, float, float], float, float]:
         wait_settled(vehicle, config.settling)
         pose, _ = sample_goal_pose(vehicle)
-        frame = fresh_frame(camera, time.monotonic() + config.frame_lag_s)
+        frame = read_fresh(camera, time.monotonic(), config.frame_lag_s, FRAME_WAIT_S)
         found = tracker.track(frame.image)
         if found is None:
             raise GoalError("at the goal pose the camera does not see the goal image's target")

@@ -140,6 +140,7 @@ from flight.vehicle import Deadline, Vehicle
 from perception.camera import Camera
 from perception.detector import Detector, detect_all
 from perception.errors import CameraFrozenError
+from perception.fresh_frame import read_fresh
 from perception.masking import paint_over
 from perception.types import Detection, Frame
 
@@ -513,14 +514,13 @@ class CentringLoop:
         return cfg.epsilon_px - margin
 
     def _read_fresh(self) -> Frame:
-        """The camera's next frame, re-read until one arrived `fresh_frame_s` after this call (bounded)."""
+        """The camera's next frame; off real time (`fresh_frame_s` > 0) the first that shows the scene as
+        it was at this call (`perception.fresh_frame`: by the frame's scene stamp, else `fresh_frame_s`
+        of arrival margin; bounded)."""
         cfg = self.config
-        wanted_s = time.monotonic() + cfg.fresh_frame_s
-        frame = self.camera.read(cfg.frame_timeout_s)
-        give_up_s = wanted_s + cfg.frame_timeout_s  # a camera whose stamps are not this clock's
-        while cfg.fresh_frame_s > 0 and frame.timestamp_s < wanted_s and time.monotonic() < give_up_s:
-            frame = self.camera.read(cfg.frame_timeout_s)
-        return frame
+        if cfg.fresh_frame_s <= 0:
+            return self.camera.read(cfg.frame_timeout_s)
+        return read_fresh(self.camera, time.monotonic(), cfg.fresh_frame_s, cfg.frame_timeout_s)
 
     def _fly(self, right_m: float, up_m: float) -> MoveResult:
         cfg = self.config

@@ -110,9 +110,11 @@ class CentringConfig(LoopSettings):
     max_steps: int = Field(default=20, ge=1)
     timeout_s: float = Field(default=120.0, gt=0.0)
     fresh_frame_s: float = Field(default=0.0, ge=0.0)
-    """Observe only a frame that arrived this long (wall clock) after the observation began: a stream
-    (render, encode, transport) shows the vehicle as it was a little earlier, which a vehicle faster
-    than real time makes k times longer on its clock. 0: the newest frame since the last read."""
+    """> 0: observe only a frame that shows the scene as it was when the observation began (a stream's
+    render, encoding and transport show the vehicle as it was a little earlier, which a vehicle faster
+    than real time makes k times longer on its clock): one stamped with its scene's time at or after
+    then, or from a camera that stamps nothing, one that arrived this long (wall clock) after
+    (`perception.fresh_frame`). 0: the newest frame since the last read."""
     stop_margin_px: float | None = Field(default=None, ge=0.0)
     """Stop when the detector's offset is within ε − this on both axes; None: `default_stop_margin_px(W)`."""
 

@@ -7,13 +7,14 @@ server adds no latency of its own and never grows a backlog.
 
 Endpoints:
 - `/stream.mjpg`: `multipart/x-mixed-replace` JPEG parts with `Content-Length`
-  (what OpenCV/FFmpeg, browsers and VLC read); starts with the latest frame.
+  (what OpenCV/FFmpeg, browsers and VLC read); starts with the latest frame. A part of a
+  frame published with a scene stamp carries it (`drone_inspect_core.video_stamps`).
 - `/frame.jpg`: the latest frame, header `X-Frame-Number`.
 - `/truth.json`: the truth published with the latest frame, or with frame N via
   `/truth.json?frame=N` (the last `truth_history` frames). For the test harness
   only: the controller must never read it.
 
-Binds loopback by default. Imports nothing of ours (it belongs to the simulated vehicle).
+Binds loopback by default. Imports nothing of ours but the ground floor (it belongs to the simulated vehicle).
 """
 
 from __future__ import annotations
@@ -32,6 +33,8 @@ from urllib.parse import parse_qs, urlsplit
 import cv2
 import numpy as np
 
+from drone_inspect_core.video_stamps import SCENE_STAMP_HEADER, format_scene_stamp
+
 log = logging.getLogger(__name__)
 
 BOUNDARY = "mjpegframe"
@@ -45,6 +48,7 @@ class PublishedFrame:
     number: int
     timestamp_s: float  # time.monotonic() at publish
     jpeg: bytes
+    scene_s: float | None = None  # time.monotonic() at which the scene shown was current
 
 
 class MjpegServer:
@@ -101,10 +105,11 @@ class MjpegServer:
     def frames_published(self) -> int:
         return self._next_number
 
-    def publish(self, image_rgb: np.ndarray, truth: Any = None) -> int:
+    def publish(self, image_rgb: np.ndarray, truth: Any = None, scene_s: float | None = None) -> int:
         """Encode an RGB uint8 (H, W, 3) image as the newest frame; returns its frame number.
 
-        `truth` (anything JSON-serialisable) is served at `/truth.json` beside it.
+        `truth` (anything JSON-serialisable) is served at `/truth.json` beside it; `scene_s` (this host's
+        time.monotonic() when the scene shown was current) goes with the frame's stream part.
         """
         image = np.asarray(image_rgb)
         if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
@@ -116,7 +121,7 @@ class MjpegServer:
         with self._cond:
             number = self._next_number
             self._next_number += 1
-            self._latest = PublishedFrame(number, time.monotonic(), buf.tobytes())
+            self._latest = PublishedFrame(number, time.monotonic(), buf.tobytes(), scene_s)
             if truth_json is not None:
                 self._truths[number] = truth_json
                 while len(self._truths) > self._truth_history:
@@ -266,9 +271,14 @@ class _Handler(BaseHTTPRequestHandler):
                 frame = owner.wait_newer(last, _WAKE_INTERVAL_S)
                 if frame is None:
                     continue
+                stamp = (
+                    ""
+                    if frame.scene_s is None
+                    else f"{SCENE_STAMP_HEADER}: {format_scene_stamp(frame.scene_s)}\r\n"
+                )
                 header = (
                     f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\nContent-Length: {len(frame.jpeg)}\r\n"
-                    f"X-Frame-Number: {frame.number}\r\n\r\n"
+                    f"X-Frame-Number: {frame.number}\r\n{stamp}\r\n"
                 ).encode()
                 self.wfile.write(header + frame.jpeg + b"\r\n")
                 self.wfile.flush()

@@ -213,13 +213,13 @@ class _Scene:
         self.faults = faults or CameraFaults()
         self.rng = random.Random(self.faults.seed)
         self.extremes = TruthExtremes()
-        self.frozen: np.ndarray | None = None
+        self.frozen: tuple[np.ndarray, float] | None = None  # the picture a freeze shows, and its stamp
         self.renders = 0
         self._drawn: tuple[list[float], np.ndarray, dict[str, Any]] | None = None  # pose, picture, truth
 
-    def draw(self, values: list[float], server: MjpegServer) -> bool:
-        """Render the drone at `values` (the shared pose) and publish it with its truth (faults applied);
-        False once the injected fault says the stream dies.
+    def draw(self, values: list[float], read_s: float, server: MjpegServer) -> bool:
+        """Render the drone at `values` (the shared pose, read at `read_s`: the frame's scene stamp) and
+        publish it with its truth (faults applied); False once the injected fault says the stream dies.
 
         A pose the last frame showed (the same position, attitude and simulated time: a lockstep that
         stands still while its client reads and plans) is not drawn again: the picture drawn for it is
@@ -240,18 +240,20 @@ class _Scene:
         if faults.dies_at_s is not None and sim_s >= faults.dies_at_s:
             log.warning("video: the stream dies at %.1f s (injected fault)", sim_s)
             return False
-        image = world.add_noise(clean)
+        image, scene_s = world.add_noise(clean), read_s
         if faults.freeze_at_s is not None and 0 <= sim_s - faults.freeze_at_s < faults.freeze_for_s:
-            self.frozen = image if self.frozen is None else self.frozen
-            image = self.frozen
+            self.frozen = (image, scene_s) if self.frozen is None else self.frozen
+            image, scene_s = self.frozen  # a frozen camera's picture is of the moment it froze
         if not (faults.drop and self.rng.random() < faults.drop):
-            server.publish(image, truth)
+            server.publish(image, truth, scene_s)
         return True
 
 
-def _read_pose(pose: Any) -> list[float]:
+def _read_pose(pose: Any) -> tuple[list[float], float]:
+    """The shared pose, and the time.monotonic() it was read at: the scene it describes was current then
+    (the vehicle overwrites it after each physics batch, the bridges at each capture)."""
     with pose.get_lock():
-        return list(pose)
+        return list(pose), time.monotonic()
 
 
 def _serve(
@@ -292,7 +294,7 @@ def _serve(
                     scene = _reset(scene, commands.recv(), pose, server, conn)
                     next_t = time.monotonic()
                 t0 = time.monotonic()
-                if not scene.draw(_read_pose(pose), server):
+                if not scene.draw(*_read_pose(pose), server=server):
                     break
                 render_s.value += time.monotonic() - t0
                 frames.value += 1
@@ -314,7 +316,7 @@ def _reset(
         conn.send(("reset-error", f"cannot build the world: {exc}"))
         return scene
     scene.world.close()
-    fresh.draw(_read_pose(pose), server)
+    fresh.draw(*_read_pose(pose), server=server)
     conn.send(("reset", server.stream_url))
     return fresh
 

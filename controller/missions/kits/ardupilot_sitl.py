@@ -150,7 +150,7 @@ def _start(mission: Mission, out_dir: Path, key: str, stack: ExitStack) -> WarmS
             pacer=sim.pace if paced else None,
         )
     )
-    camera = stream_camera_for(stack, sim)
+    camera = stream_camera_for(stack, sim, mission)
     info = {
         "backend": "ArduPilot SITL (real firmware) flying the PyBullet world; GUIDED + MJPEG",
         "ardupilot_dir": str(config.ardupilot_dir),

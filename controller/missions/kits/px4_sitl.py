@@ -166,7 +166,7 @@ def _start(
             peer_alive=lambda: sim.alive,  # a PX4 that died ends its bridge: lost at once
         )
     )
-    camera = stream_camera_for(stack, sim)
+    camera = stream_camera_for(stack, sim, mission)
     info = {
         "backend": "PX4 SITL (real firmware) flying the PyBullet world; MAVSDK + MJPEG",
         "px4_dir": str(config.px4_dir),

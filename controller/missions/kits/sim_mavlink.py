@@ -158,7 +158,7 @@ def _start(
             peer_alive=lambda: sim.alive,
         )
     )
-    camera = stream_camera_for(stack, sim)
+    camera = stream_camera_for(stack, sim, mission)
     info = {
         "backend": "sim-vehicle subprocess over MAVLink (MAVSDK) + MJPEG stream",
         "ports": {

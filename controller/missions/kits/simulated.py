@@ -25,10 +25,12 @@ from controller.missions.kits.base import (
     named_target,
     planner_for,
 )
+from controller.missions.loop_setup import simulator_speed
 from controller.missions.schema import Mission
 from controller.missions.setup import scene_config_for, wind_config_for
 from controller.missions.truth import TrueTarget, TruthFollower
 from drone_inspect_core.signing import SigningKey
+from drone_inspect_core.sim_speed import off_real_time
 from drone_inspect_core.vehicle_limits import VehicleLimits
 from drone_inspect_core.vocabulary import colour_name
 from drone_inspect_core.world_options import StartPose
@@ -193,9 +195,15 @@ def relay_for(
     )
 
 
-def stream_camera_for(stack: ExitStack, sim: SimulatorProcess) -> StreamCamera:
-    """The simulator's MJPEG stream as the flight's camera, open in `stack`."""
-    return stack.enter_context(StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0))
+def stream_camera_for(stack: ExitStack, sim: SimulatorProcess, mission: Mission) -> StreamCamera:
+    """The simulator's MJPEG stream as the flight's camera, open in `stack`. Off real time it is read with
+    its scene stamps, so that a picture taken once the vehicle stopped is one of where it stopped however
+    slow the render (`perception.fresh_frame`); at real time it is read through FFmpeg, as a real
+    vehicle's stream is."""
+    stamps = off_real_time(simulator_speed(mission))
+    return stack.enter_context(
+        StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0, scene_stamps=stamps)
+    )
 
 
 def simulated_mavlink_kit(mission: Mission, models: LoadedModels | None, sim: SimulatedVehicle) -> FlightKit:

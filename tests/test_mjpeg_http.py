@@ -1,0 +1,196 @@
+"""Scene stamps from a simulator's stream to the loop's fresh frame.
+
+The render process stamps each frame with when its pose was read; the MJPEG server sends the stamp with
+each part; `StreamCamera(scene_stamps=True)` reads the stream part by part (`perception.mjpeg_http`, the
+JPEG decoded by OpenCV) and hands the stamp on as `Frame.scene_s`; `read_fresh` then takes the first frame
+of the scene as it was at a moment, by the stamp, and by arrival time from a camera that stamps nothing.
+The parser is also fed broken and hostile bytes directly."""
+
+from __future__ import annotations
+
+import io
+import socket
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from drone_inspect_core.video_stamps import SCENE_STAMP_HEADER, parse_scene_stamp
+from perception.errors import CameraOpenError
+from perception.fresh_frame import is_fresh, read_fresh
+from perception.mjpeg_http import MAX_PART_BYTES, MjpegParts, MjpegStreamError, boundary_of
+from perception.stream_camera import StreamCamera
+from perception.types import Frame
+from sim_world.rendering.mjpeg import MjpegServer
+from tests.test_perception_stream_camera import counter_image, read_counter
+
+
+def _publish_stamped(server: MjpegServer, stop: threading.Event, stamps: dict[int, float]) -> None:
+    n = 0
+    while not stop.is_set():
+        stamp = 1000.0 + n * 0.25
+        stamps[100 + n % 100] = stamp
+        server.publish(counter_image(100 + n % 100), scene_s=stamp)
+        n += 1
+        stop.wait(0.02)
+
+
+@pytest.mark.parametrize("stamped", [True, False])
+def test_each_frame_keeps_the_scene_stamp_its_part_carried_and_ffmpeg_still_reads_the_stream(
+    stamped: bool,
+) -> None:
+    stamps: dict[int, float] = {}
+    stop = threading.Event()
+    with MjpegServer(port=0) as server:
+        thread = threading.Thread(target=_publish_stamped, args=(server, stop, stamps))
+        thread.start()
+        try:
+            with StreamCamera(
+                server.stream_url, timeout_s=2.0, open_timeout_s=3.0, scene_stamps=stamped
+            ) as cam:
+                frames = [cam.read() for _ in range(5)]
+        finally:
+            stop.set()
+            thread.join()
+    numbers = [read_counter(f.image) for f in frames]
+    assert all(100 <= n < 200 for n in numbers) and numbers == sorted(numbers)  # decoded, in order
+    if stamped:  # each frame with the stamp its own part carried, not another's
+        assert [f.scene_s for f in frames] == [stamps[n] for n in numbers]
+    else:  # FFmpeg reads the same stream, extra header and all, and knows no stamp
+        assert all(f.scene_s is None for f in frames)
+
+
+def test_scene_stamps_only_from_an_http_stream_and_a_wrong_url_says_why() -> None:
+    with pytest.raises(ValueError, match="http://"):
+        StreamCamera("rtsp://127.0.0.1:1/x", scene_stamps=True)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with pytest.raises(CameraOpenError, match=r"refused|stream"):
+        StreamCamera(f"http://127.0.0.1:{port}/stream.mjpg", open_timeout_s=1.0, scene_stamps=True)
+    with MjpegServer(port=0) as server:
+        server.publish(counter_image(1))
+        with pytest.raises(CameraOpenError, match="not an MJPEG stream"):  # /frame.jpg is one JPEG
+            StreamCamera(
+                server.stream_url.replace("stream.mjpg", "frame.jpg"), open_timeout_s=1.0, scene_stamps=True
+            )
+
+
+def _parts(body: bytes, boundary: str = "b") -> MjpegParts:
+    return MjpegParts(
+        io.BufferedReader(io.BytesIO(body)), boundary_of(f"multipart/x-mixed-replace; boundary={boundary}")
+    )
+
+
+def test_the_parser_reads_parts_with_and_without_a_length_and_refuses_hostile_ones() -> None:
+    jpeg = b"\xff\xd8 some bytes\r\n--b but not a boundary line \xff\xd9"
+    stream = (
+        b"preamble\r\n--b\r\nContent-Type: image/jpeg\r\nContent-Length: %d\r\n"
+        b"X-Scene-Monotonic: 12.5\r\n\r\n%s\r\n"
+        b"--b\r\nContent-Type: image/jpeg\r\n\r\nno length\r\nsecond line\r\n--b\r\n"
+        b"Content-Length: 3\r\n\r\nabc\r\n--b--\r\n"
+    ) % (len(jpeg), jpeg)
+    parts = _parts(stream)
+    headers, body = parts.next_part()
+    assert body == jpeg and parse_scene_stamp(headers[SCENE_STAMP_HEADER.lower()]) == 12.5
+    assert parts.next_part() == ({"content-type": "image/jpeg"}, b"no length\r\nsecond line")
+    assert parts.next_part()[1] == b"abc"  # the boundary the part before consumed
+    with pytest.raises(MjpegStreamError, match="closing boundary"):
+        parts.next_part()
+
+    hostile = {
+        b"--b\r\nContent-Length: %d\r\n\r\n" % (MAX_PART_BYTES + 1): "at most",
+        b"--b\r\nContent-Length: -5\r\n\r\n": "at most",
+        b"--b\r\nContent-Length: lots\r\n\r\n": "not a number",
+        b"--b\r\nContent-Length: 100\r\n\r\nshort": "inside a part",
+        b"--b\r\n" + b"X: y\r\n" * 40 + b"\r\n": "more than",
+        b"--b\r\nX: " + b"y" * 10000 + b"\r\n": "over",
+        b"x" * 100: "the stream ended",
+        (b"junk " * 20 + b"\r\n") * 20000: "no part boundary",
+    }
+    for data, message in hostile.items():
+        with pytest.raises(MjpegStreamError, match=message):
+            _parts(data).next_part()
+    for content_type in ("image/jpeg", "multipart/x-mixed-replace", "multipart/x-mixed-replace; boundary="):
+        with pytest.raises(MjpegStreamError):
+            boundary_of(content_type)
+    assert [parse_scene_stamp(v) for v in ("3.25", " 7 ", "nan", "-1", "inf", "x", None)] == [
+        3.25,
+        7.0,
+        None,
+        None,
+        None,
+        None,
+        None,
+    ]
+
+
+def test_a_part_that_does_not_decode_is_skipped_and_the_next_one_read() -> None:
+    """A server (a raw socket, named so) that sends a corrupt part, then a good one."""
+    import cv2
+
+    good = cv2.imencode(".jpg", counter_image(42))[1].tobytes()
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(1)
+
+    def serve() -> None:
+        conn, _ = listener.accept()
+        with conn:
+            conn.recv(4096)
+            conn.sendall(b"HTTP/1.0 200 OK\r\nContent-Type: multipart/x-mixed-replace;boundary=xx\r\n\r\n")
+            for body, stamp in ((b"\xff\xd8 not a picture", b"1.0"), (good, b"2.0")):
+                conn.sendall(
+                    b"--xx\r\nContent-Length: %d\r\nX-Scene-Monotonic: %s\r\n\r\n%s\r\n"
+                    % (len(body), stamp, body)
+                )
+            time.sleep(0.5)
+
+    thread = threading.Thread(target=serve)
+    thread.start()
+    try:
+        url = f"http://127.0.0.1:{listener.getsockname()[1]}/stream.mjpg"
+        with StreamCamera(url, timeout_s=2.0, open_timeout_s=2.0, scene_stamps=True, reconnect=False) as cam:
+            frame = cam.read()
+    finally:
+        thread.join()
+        listener.close()
+    assert read_counter(frame.image) == 42 and frame.scene_s == 2.0
+
+
+class FakeCamera:
+    """Hands out the frames it is given, one per read (a fake for the freshness rule alone)."""
+
+    def __init__(self, frames: list[Frame]) -> None:
+        self.frames, self.reads = frames, 0
+
+    def read(self, timeout_s: float | None = None) -> Frame:
+        self.reads += 1
+        if len(self.frames) == 1:  # the last one again, a frame period later: a stream that stopped moving
+            time.sleep(0.01)
+            return self.frames[0]
+        return self.frames.pop(0)
+
+
+def _frame(n: int, arrived_s: float, scene_s: float | None) -> Frame:
+    return Frame(np.zeros((2, 2, 3), np.uint8), arrived_s, n, scene_s)
+
+
+def test_a_fresh_frame_is_chosen_by_its_stamp_when_it_has_one_else_by_arrival_and_margin() -> None:
+    now = time.monotonic()
+    # Stamped: a frame that arrived late but shows the scene from before `now` is stale; one stamped at
+    # `now` is fresh at once, with no wall-time margin.
+    stamped = FakeCamera(
+        [_frame(0, now + 0.5, now - 0.01), _frame(1, now + 0.01, now), _frame(2, now + 1, now + 1)]
+    )
+    assert read_fresh(stamped, now, margin_s=0.1, timeout_s=2.0).frame_number == 1 and stamped.reads == 2
+    # Unstamped: the margin counts from arrival.
+    plain = FakeCamera([_frame(0, now + 0.05, None), _frame(1, now + 0.1, None), _frame(2, now + 1, None)])
+    assert read_fresh(plain, now, margin_s=0.1, timeout_s=2.0).frame_number == 1
+    assert is_fresh(_frame(0, now, now), now, 0.1) and not is_fresh(_frame(0, now, None), now, 0.1)
+    # Bounded: a stream whose frames never get fresh gives its newest once the wait is over.
+    old = FakeCamera([_frame(i, now - 10 + i, None) for i in range(3)])
+    started = time.monotonic()
+    assert read_fresh(old, time.monotonic(), margin_s=0.0, timeout_s=0.2).frame_number == 2
+    assert time.monotonic() - started < 1.0
