@@ -118,6 +118,7 @@ class LauncherRequests:
         self.paces = 0
         self.paced_at = 0.0
         self.paced = threading.Event()
+        self._arrived = threading.Event()  # a request was queued since the last `wait`
         threading.Thread(target=self._read, args=(stream,), name="launcher-requests", daemon=True).start()
 
     def _read(self, stream: TextIO) -> None:
@@ -134,8 +135,15 @@ class LauncherRequests:
                 self.paced.set()
             elif isinstance(request, dict):
                 self._queue.put(request)
+                self._arrived.set()
             else:
                 log.error("%s: not a JSON object from the launcher: %.80r", self._name, line)
+
+    def wait(self, timeout_s: float) -> None:
+        """Until a request is queued (at once if one is) or `timeout_s` passes."""
+        if self._queue.empty():
+            self._arrived.wait(timeout_s)
+        self._arrived.clear()
 
     def take(self) -> dict[str, Any] | None:
         try:

@@ -67,6 +67,8 @@ def test_a_reset_sim_vehicle_shows_the_world_a_fresh_one_builds(tmp_path: Path) 
         with pytest.raises(SimulatorResetError, match="not the vehicle"):  # the link is not the world's
             sim.reset(_run(11, second.start_offset, speed="max"), tmp_path / "c" / "sim.log")
         assert sim.alive
+    # The render process built its world while the vehicle built its own (`WorldVideoFeed.prepare`).
+    assert "the new world is shown (built ahead)" in (tmp_path / "b" / "sim.log").read_text()
     world, _ = build_world(second)  # what a fresh sim-vehicle for the second run starts with
     with world:
         expected = world.target_truth()

@@ -123,6 +123,7 @@ class WorldVideoFeed:
             daemon=True,
         )
         self.stream_url = ""
+        self.resets_built_ahead = 0  # resets whose world the render process had built ahead (`prepare`)
 
     @property
     def truth_url(self) -> str:
@@ -152,6 +153,12 @@ class WorldVideoFeed:
         self.stream_url = detail
         log.info("video %s (render process %d)", self.stream_url, self._proc.pid)
 
+    def prepare(self, world_config: WorldConfig, seed: int) -> None:
+        """A reset to this world is coming: the render process builds it now, while the caller builds its
+        own, and `reset` with the same world takes it (any other world is built then, as without this)."""
+        if self._proc.is_alive():
+            self._commands.send(("build", world_config, seed))
+
     def reset(self, world: World, origin_enu_m: np.ndarray, faults: CameraFaults | None) -> None:
         """Show `world` (a fresh build, of any scene and seed) from now on, its truth from `origin_enu_m`
         with `faults`: the render process rebuilds it, and its first frame is published before this
@@ -167,6 +174,8 @@ class WorldVideoFeed:
                                  f"{self.config.start_timeout_s:.0f} s")  # fmt: skip
             kind, detail = self._conn.recv()
             if kind == "reset":
+                self.resets_built_ahead += bool(detail)
+                log.info("video: the new world is shown (%s)", "built ahead" if detail else "built on reset")
                 return
             if kind == "reset-error":
                 raise VideoError(f"the render process cannot show the new world: {detail}")
@@ -289,9 +298,14 @@ def _serve(
             parent = os.getppid()
             # A vehicle killed outright never sets `stop` (and `daemon=True` only acts on a normal
             # exit): re-parenting means it is gone, so stop rather than render for nobody forever.
+            pending = _PendingWorld()
             while not stop.value and os.getppid() == parent:
                 if commands.poll():
-                    scene = _reset(scene, commands.recv(), pose, server, conn)
+                    command = commands.recv()
+                    if command[0] == "build":  # a reset is coming: its world is built meanwhile
+                        pending.build(command[1], command[2])
+                        continue
+                    scene = _reset(scene, command, pending, pose, server, conn)
                     next_t = time.monotonic()
                 t0 = time.monotonic()
                 if not scene.draw(*_read_pose(pose), server=server):
@@ -299,25 +313,71 @@ def _serve(
                 render_s.value += time.monotonic() - t0
                 frames.value += 1
                 next_t = max(next_t + period, time.monotonic())  # at most `fps` frames a wall second
-                while not stop.value and not commands.poll() and (left := next_t - time.monotonic()) > 0:
-                    time.sleep(min(STOP_POLL_S, left))
+                while not stop.value and (left := next_t - time.monotonic()) > 0:
+                    if commands.poll(min(STOP_POLL_S, left)):  # a command wakes it at once
+                        break
     finally:
         scene.world.close()
+        pending.close()
+
+
+class _PendingWorld:
+    """The world a coming reset will show, built ahead (`WorldVideoFeed.prepare`) while the vehicle builds
+    its own; a reset of another world (or seed) builds its own and this one is closed."""
+
+    def __init__(self) -> None:
+        self.key: tuple[WorldConfig, int] | None = None
+        self.world: World | None = None
+        self.error: str | None = None
+
+    def build(self, world_config: WorldConfig, seed: int) -> None:
+        self.close()
+        self.key = (world_config, seed)
+        try:
+            self.world = World(world_config, seed)
+        except Exception as exc:
+            self.error = f"cannot build the world: {exc}"
+
+    def take(self, world_config: WorldConfig, seed: int) -> World | None:
+        """The world built ahead if it is this one (a build that failed raises its error); else None."""
+        if self.key != (world_config, seed):
+            self.close()
+            return None
+        world, error = self.world, self.error
+        self.key, self.world, self.error = None, None, None
+        if error is not None:
+            raise RuntimeError(error)
+        return world
+
+    def close(self) -> None:
+        if self.world is not None:
+            self.world.close()
+        self.key, self.world, self.error = None, None, None
 
 
 def _reset(
-    scene: _Scene, command: tuple[Any, ...], pose: Any, server: MjpegServer, conn: Connection
+    scene: _Scene,
+    command: tuple[Any, ...],
+    pending: _PendingWorld,
+    pose: Any,
+    server: MjpegServer,
+    conn: Connection,
 ) -> _Scene:
-    """Build the world a reset asks for and publish its first frame; the old scene stays on error."""
+    """Build the world a reset asks for (or take the one built ahead) and publish its first frame; the old
+    scene stays on error."""
     _, world_config, seed, origin_enu_m, faults = command
     try:
-        fresh = _Scene(World(world_config, seed), origin_enu_m, faults)
+        world = pending.take(world_config, seed)
+        ahead = world is not None
+        fresh = _Scene(world if world is not None else World(world_config, seed), origin_enu_m, faults)
     except Exception as exc:
-        conn.send(("reset-error", f"cannot build the world: {exc}"))
+        conn.send(
+            ("reset-error", str(exc) if str(exc).startswith("cannot") else f"cannot build the world: {exc}")
+        )
         return scene
     scene.world.close()
     fresh.draw(*_read_pose(pose), server=server)
-    conn.send(("reset", server.stream_url))
+    conn.send(("reset", ahead))
     return fresh
 
 

@@ -14,6 +14,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any, TextIO
@@ -77,10 +78,15 @@ class SimVehicleReady:
     stamped later is the new world's."""
 
 
+def world_config_of(run: SimVehicleRun) -> WorldConfig:
+    """The world a run flies in (its scene, camera and wind; the seed is the run's)."""
+    camera = CameraConfig(width=run.image_size_px, height=run.image_size_px)
+    return WorldConfig(scene=run.scene, camera=camera, wind=run.wind)
+
+
 def build_world(run: SimVehicleRun) -> tuple[World, SimVehicleConfig]:
     """The world with the drone placed, and the vehicle config with MIS_TAKEOFF_ALT filled in."""
-    camera = CameraConfig(width=run.image_size_px, height=run.image_size_px)
-    world = World(WorldConfig(scene=run.scene, camera=camera, wind=run.wind), seed=run.seed)
+    world = World(world_config_of(run), seed=run.seed)
     vehicle = run.vehicle
     if run.start_offset is not None:
         o = run.start_offset
@@ -141,8 +147,12 @@ def run_sim_vehicle(
                     )
                     os.kill(os.getpid(), signal.SIGKILL)  # no goodbye on the link, as a crash
                 step = period if run.duration_s is None else min(period, run.duration_s - waited)
-                stop.wait(step)
-                waited += step
+                began = time.monotonic()
+                if requests is not None:
+                    requests.wait(step)  # a reset request wakes it at once
+                else:
+                    stop.wait(step)
+                waited += time.monotonic() - began
                 request = requests.take() if requests is not None else None
                 if request is not None:
                     run, world = _reset(vehicle, video, run, world, request, on_reset)
@@ -181,6 +191,8 @@ def _reset(
             raise ValueError("a reset may change the world, not the vehicle (ports, id, speed, limits)")
         if new_run.image_size_px != run.image_size_px:
             raise ValueError("a reset may not change the camera's image size")
+        if video is not None:  # the render process builds its world while this one is built
+            video.prepare(world_config_of(new_run), new_run.seed)
         new_world, vehicle_config = build_world(new_run)
     except (ValueError, KeyError, TypeError) as exc:
         if on_reset is not None:
