@@ -10,7 +10,8 @@ stamp. As FFmpeg does, it is open only once the stream has given a frame that de
 
 Hostile or broken input is bounded: a part over `MAX_PART_BYTES`, a header line over
 `MAX_LINE_BYTES`, more than `MAX_HEADERS` headers or `MAX_SKIP_BYTES` of bytes that are no part end
-the stream (the camera's reconnect takes over); a part that does not decode is skipped. Every socket
+the stream (the camera's reconnect takes over); a part that does not decode is skipped, and
+`MAX_BAD_PARTS` of them in a row end the stream too. Every socket
 read is bounded by the read timeout; `release()` from another thread ends a blocked read.
 """
 
@@ -33,6 +34,7 @@ MAX_PART_BYTES = 16 * 1024 * 1024
 MAX_LINE_BYTES = 4096
 MAX_HEADERS = 32
 MAX_SKIP_BYTES = 1024 * 1024
+MAX_BAD_PARTS = 30  # parts in a row that do not decode before the stream counts as broken
 
 
 class MjpegStreamError(Exception):
@@ -168,6 +170,7 @@ class MjpegHttpCapture:
         if self._first is not None and self._parts is not None:
             (bgr, self.scene_s), self._first = self._first, None
             return True, bgr
+        bad = 0
         while self._parts is not None:
             try:
                 headers, body = self._parts.next_part()
@@ -178,6 +181,10 @@ class MjpegHttpCapture:
             bgr = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_COLOR)
             if bgr is None:
                 self.skipped += 1
+                bad += 1
+                if bad >= MAX_BAD_PARTS:
+                    self.error = f"{bad} parts in a row are no picture OpenCV can decode"
+                    return False, None
                 continue
             self.scene_s = parse_scene_stamp(headers.get(SCENE_STAMP_HEADER.lower()))
             return True, bgr

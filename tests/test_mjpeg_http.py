@@ -8,6 +8,7 @@ The parser is also fed broken and hostile bytes directly."""
 
 from __future__ import annotations
 
+import contextlib
 import io
 import socket
 import threading
@@ -19,7 +20,7 @@ import pytest
 from drone_inspect_core.video_stamps import SCENE_STAMP_HEADER, parse_scene_stamp
 from perception.errors import CameraOpenError
 from perception.fresh_frame import is_fresh, read_fresh
-from perception.mjpeg_http import MAX_PART_BYTES, MjpegParts, MjpegStreamError, boundary_of
+from perception.mjpeg_http import MAX_BAD_PARTS, MAX_PART_BYTES, MjpegParts, MjpegStreamError, boundary_of
 from perception.stream_camera import StreamCamera
 from perception.types import Frame
 from sim_world.rendering.mjpeg import MjpegServer
@@ -157,6 +158,36 @@ def test_a_part_that_does_not_decode_is_skipped_and_the_next_one_read() -> None:
         thread.join()
         listener.close()
     assert read_counter(frame.image) == 42 and frame.scene_s == 2.0
+
+
+def test_a_stream_of_parts_that_never_decode_is_refused_not_read_forever() -> None:
+    """A server (a raw socket, named so) whose parts are all garbage: opening fails, saying so."""
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(1)
+    sent = threading.Event()
+
+    def serve() -> None:
+        conn, _ = listener.accept()
+        with conn:
+            conn.recv(4096)
+            conn.sendall(b"HTTP/1.0 200 OK\r\nContent-Type: multipart/x-mixed-replace; boundary=xx\r\n\r\n")
+            with contextlib.suppress(OSError):
+                for _ in range(MAX_BAD_PARTS + 5):
+                    conn.sendall(b"--xx\r\nContent-Length: 4\r\n\r\njunk\r\n")
+            sent.set()
+            time.sleep(1.0)
+
+    thread = threading.Thread(target=serve)
+    thread.start()
+    try:
+        url = f"http://127.0.0.1:{listener.getsockname()[1]}/stream.mjpg"
+        with pytest.raises(CameraOpenError, match="no picture OpenCV can decode"):
+            StreamCamera(url, timeout_s=2.0, open_timeout_s=3.0, scene_stamps=True, reconnect=False)
+    finally:
+        thread.join()
+        listener.close()
+    assert sent.is_set()
 
 
 class FakeCamera:
