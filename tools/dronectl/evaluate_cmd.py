@@ -13,6 +13,7 @@ from dronectl.options import CommandParser, at_least, new_file, say_error, seed_
 
 if TYPE_CHECKING:
     from controller.evaluation.evaluate import EvalResult
+    from controller.evaluation.with_detector import WithDetectorResult
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -32,6 +33,19 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="also score the same instructions as flown: each understood by the loop's parser and heard "
         "by the planner in its trained words (refused or misread instructions count as failures)",
+    )
+    p.add_argument(
+        "--with-detector",
+        action="store_true",
+        help="also score the planner as the centring loop shows it each image: the image detector takes "
+        "the asked target (its kind; among twins, the trim colour it reads), the other targets of that "
+        "kind painted over, the planner asked in its trained words",
+    )
+    p.add_argument(
+        "--detector",
+        type=Path,
+        default=None,
+        help="the image detector's checkpoint for --with-detector (default: the shipped one)",
     )
     p.add_argument(
         "--split", default="test", choices=("test", "train", "goal"), help="dataset split to score"
@@ -70,6 +84,17 @@ def main(argv: list[str]) -> int:
     from controller.planning.latent.errors import LatentError
     from drone_inspect_core.dataset import DatasetError
 
+    detector = None
+    if args.with_detector:  # loaded first: a wrong checkpoint is said before the long scoring
+        from perception.errors import DetectorCheckpointError
+        from perception.image_detector import ImageDetector
+
+        try:
+            detector = ImageDetector.shipped() if args.detector is None else ImageDetector.load(args.detector)
+        except DetectorCheckpointError as exc:
+            say_error("dronectl evaluate", str(exc))
+            return 1
+
     try:
         results = evaluate_checkpoint_modes(
             args.model, args.data, args.instructions, args.split, args.epsilon_px, args.seed,
@@ -80,6 +105,18 @@ def main(argv: list[str]) -> int:
         return 1
     for result in results:
         _print_result(result, detailed=result is results[0])
+    with_detector = None
+    if detector is not None:
+        from controller.evaluation.with_detector import evaluate_with_detector
+
+        try:
+            with_detector = evaluate_with_detector(
+                args.model, args.data, detector, args.split, args.epsilon_px
+            )
+        except (LatentError, DatasetError, ValueError) as exc:
+            say_error("dronectl evaluate", str(exc))
+            return 1
+        _print_with_detector(with_detector)
     if args.latency > 0:
         from controller.benchmarks.planner_latency import latency_on_dataset
 
@@ -94,8 +131,25 @@ def main(argv: list[str]) -> int:
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         payload = results[0].__dict__ if len(results) == 1 else {r.instructions: r.__dict__ for r in results}
+        if with_detector is not None:
+            payload = {**payload, "with_detector": with_detector.as_dict()}
         write_json_atomic(args.json, payload, indent=1)
     return 0
+
+
+def _print_with_detector(result: WithDetectorResult) -> None:
+    twins = (
+        f"; naming a colour (twins in the scene): {100 * result.twins_rank1:.2f}% of {result.twins}"
+        if result.twins_rank1 is not None
+        else ""
+    )
+    print(
+        f"as the loop shows it (the detector taking the target, its twins painted over): rank-1 "
+        f"{100 * result.rank1:.2f}% of {result.n} images; no detection matched in {result.not_found}, "
+        f"another target taken in {result.wrong_choice}{twins}"
+    )
+    if result.matched_rank1 is not None:
+        print(f"  rank-1 where a detection matched: {100 * result.matched_rank1:.2f}%")
 
 
 def _print_result(result: EvalResult, detailed: bool) -> None:

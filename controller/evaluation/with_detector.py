@@ -1,0 +1,121 @@
+"""The planner's rank-1 on dataset images as the centring loop shows them to it, the detector included.
+
+`evaluate`'s rank-1 scores the planner alone: the image as it is, the instruction in the planner's
+words. The loop does more before the planner sees a frame: the detector finds the targets, the loop
+takes the detection the instruction asks for (its kind; among twins, the trim colour the detector
+reads), and paints over the other targets of that kind (`CentringLoop._planner_picture`), so that the
+planner plans towards the one the loop tests ε on. Here each test image whose named target is in view
+goes through the same steps:
+
+1. the loop's query for the named target: its kind, and its trim colour where the scene has another
+   target of that kind (twins: an operator must name the colour; elsewhere the kind is enough);
+2. the detector's detections (`perception.detector.detect_all`) and the one the loop takes
+   (`grounding.select_target`);
+3. the other detections of its kind painted over (`perception.masking.paint_over`);
+4. the planner asked in its trained words (`grounding.planner_instruction`) through the adapter the loop
+   uses (`LatentPlannerAdapter`, mirror test-time augmentation as its checkpoint says).
+
+Counted over every such image: rank-1 (the planner's action is the named target's label), the images
+where no detection matches the query (the loop would hold and look again: no move, a miss here), and
+those where the detection taken is nearer another target's true centre than the named one's (the
+detector's colour reading chose the wrong twin); and rank-1 over the images where a detection matched.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from controller.planning.actions import label_from_offset
+from controller.planning.grounding import TargetQuery, planner_instruction, select_target
+from controller.planning.planners import LatentPlannerAdapter, Observation
+from controller.training.data import Row, load_index
+from drone_inspect_core.dataset import read_image_rgb
+from perception.detector import Detector, detect_all
+from perception.masking import paint_over
+from perception.types import Detection
+
+
+@dataclass(frozen=True)
+class WithDetectorResult:
+    """Rank-1 of the planner as the loop shows it each image; the misses the detector caused."""
+
+    n: int
+    rank1: float
+    not_found: int
+    """Images where no detection matched the query: the loop would not move."""
+    wrong_choice: int
+    """Images where the detection taken is another target (nearer its true centre)."""
+    twins: int
+    """Images whose query names a colour (the scene has another target of the named one's kind)."""
+    twins_rank1: float | None
+    matched_rank1: float | None
+    """Rank-1 over the images where a detection matched: the planner's part alone."""
+
+    def as_dict(self) -> dict[str, float | int | None]:
+        return asdict(self)
+
+
+def loop_query(row: Row) -> TargetQuery:
+    """What an operator asks for the named target: its kind, and its colour where the scene has twins."""
+    named, others = row.targets[0], row.targets[1:]
+    twins = any(t.kind == named.kind for t in others)
+    return TargetQuery(named.kind, named.attribute if twins else None)
+
+
+def _took_another(detection: Detection, row: Row, width: int, height: int) -> bool:
+    """Whether `detection` lies nearer another in-view target's true centre than the named one's."""
+
+    def gap(offset: tuple[float, float]) -> float:
+        return math.dist(detection.centre_px, (offset[0] + width / 2.0, offset[1] + height / 2.0))
+
+    named = gap(row.targets[0].offset_px)
+    return any(t.in_view and gap(t.offset_px) < named for t in row.targets[1:])
+
+
+def evaluate_with_detector(
+    model_dir: Path,
+    data_dir: Path,
+    detector: Detector,
+    split: str = "test",
+    epsilon_px: float | None = None,
+) -> WithDetectorResult:
+    """Score the checkpoint at `model_dir` on `data_dir`'s `split` as the loop shows it each image (see
+    the module docstring); `epsilon_px` None: the dataset's default ε."""
+    index = load_index(data_dir)
+    eps = epsilon_px if epsilon_px is not None else index.default_epsilon_px()
+    planner = LatentPlannerAdapter(model_dir)
+    rows = [r for r in index.split(split) if r.in_view and r.targets]
+    if not rows:
+        raise ValueError(f"{data_dir}: no {split} image whose named target is in view")
+    hits = not_found = wrong = twins = twin_hits = 0
+    for row in rows:
+        image = read_image_rgb(row.image if row.image.is_absolute() else index.root / row.image)
+        height, width = image.shape[:2]
+        query = loop_query(row)
+        detections = detect_all(detector, image)
+        chosen = select_target(detections, query)
+        named_twins = query.attribute is not None
+        twins += named_twins
+        if chosen is None:
+            not_found += 1
+            continue
+        wrong += _took_another(chosen, row, width, height)
+        others = [d.bbox_px for d in detections if d is not chosen and d.kind == chosen.kind]
+        observation = Observation(
+            paint_over(image, others), chosen, planner_instruction(query), eps, None, detections
+        )
+        action = planner.plan(observation).action
+        hit = action.index == label_from_offset(row.offset_px[0], row.offset_px[1], eps).index
+        hits += hit
+        twin_hits += hit and named_twins
+    return WithDetectorResult(
+        n=len(rows),
+        rank1=hits / len(rows),
+        not_found=not_found,
+        wrong_choice=wrong,
+        twins=twins,
+        twins_rank1=twin_hits / twins if twins else None,
+        matched_rank1=hits / (len(rows) - not_found) if len(rows) > not_found else None,
+    )
