@@ -19,6 +19,11 @@ Counted over every such image: rank-1 (the planner's action is the named target'
 where no detection matches the query (the loop would hold and look again: no move, a miss here), and
 those where the detection taken is nearer another target's true centre than the named one's (the
 detector's colour reading chose the wrong twin); and rank-1 over the images where a detection matched.
+
+"Not in view" as the loop decides it on one read: a target is taken only when a detection matches the
+query and the planner's presence head, asked by kind on the picture it would see, does not say the kind
+is out of view. Counted for each named target (called absent: missed) and for each kind no target in
+view has (called present: the loop would fly towards something).
 """
 
 from __future__ import annotations
@@ -27,8 +32,10 @@ import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import numpy as np
+
 from controller.planning.actions import label_from_offset
-from controller.planning.grounding import TargetQuery, planner_instruction, select_target
+from controller.planning.grounding import TargetQuery, planner_instruction, presence_query, select_target
 from controller.planning.planners import LatentPlannerAdapter, Observation
 from controller.training.data import Row, load_index
 from drone_inspect_core.dataset import read_image_rgb
@@ -52,6 +59,13 @@ class WithDetectorResult:
     twins_rank1: float | None
     matched_rank1: float | None
     """Rank-1 over the images where a detection matched: the planner's part alone."""
+    present_called_absent: float | None = None
+    """"Not in view" as the loop decides it (a matching detection, and the planner's presence head not
+    saying its kind is out of view): the share of named targets (in view) it would call absent; None
+    when the planner gives no verdict."""
+    absent_called_present: float | None = None
+    """The same decision asked for each kind no target in view has: the share it would call present."""
+    absent_pairs: int = 0
 
     def as_dict(self) -> dict[str, float | int | None]:
         return asdict(self)
@@ -89,12 +103,18 @@ def evaluate_with_detector(
     rows = [r for r in index.split(split) if r.in_view and r.targets]
     if not rows:
         raise ValueError(f"{data_dir}: no {split} image whose named target is in view")
-    hits = not_found = wrong = twins = twin_hits = 0
+    hits = not_found = wrong = twins = twin_hits = present_missed = absent_pairs = absent_taken = 0
+    kinds = sorted({t.kind for r in rows for t in r.targets})
     for row in rows:
         image = read_image_rgb(row.image if row.image.is_absolute() else index.root / row.image)
         height, width = image.shape[:2]
         query = loop_query(row)
         detections = detect_all(detector, image)
+        for kind in kinds:  # asked for a kind not in view: what the loop would take for it
+            if not any(t.in_view and t.kind == kind for t in row.targets):
+                absent_pairs += 1
+                absent_taken += _found(planner, image, detections, TargetQuery(kind), eps)
+        present_missed += not _found(planner, image, detections, query, eps)
         chosen = select_target(detections, query)
         named_twins = query.attribute is not None
         twins += named_twins
@@ -118,4 +138,28 @@ def evaluate_with_detector(
         twins=twins,
         twins_rank1=twin_hits / twins if twins else None,
         matched_rank1=hits / (len(rows) - not_found) if len(rows) > not_found else None,
+        present_called_absent=present_missed / len(rows) if planner.judges_presence else None,
+        absent_called_present=absent_taken / absent_pairs
+        if planner.judges_presence and absent_pairs
+        else None,
+        absent_pairs=absent_pairs,
     )
+
+
+def _found(
+    planner: LatentPlannerAdapter,
+    image: np.ndarray,
+    detections: tuple[Detection, ...],
+    query: TargetQuery,
+    eps: float,
+) -> bool:
+    """Whether the loop takes a detection for `query`'s target on this read: one matches it, and the
+    planner, asked by kind on the picture it would see (`CentringLoop._confirm`), does not say the kind
+    is out of view."""
+    chosen = select_target(detections, query)
+    if chosen is None:
+        return False
+    others = [d.bbox_px for d in detections if d is not chosen and d.kind == chosen.kind]
+    asked = planner_instruction(presence_query(query, chosen))
+    plan = planner.plan(Observation(paint_over(image, others), chosen, asked, eps, None, detections))
+    return plan.in_view is not False

@@ -150,6 +150,12 @@ def _print_with_detector(result: WithDetectorResult) -> None:
     )
     if result.matched_rank1 is not None:
         print(f"  rank-1 where a detection matched: {100 * result.matched_rank1:.2f}%")
+    if result.present_called_absent is not None and result.absent_called_present is not None:
+        print(
+            f"  not in view as the loop decides (a matching detection, the presence head by kind): present "
+            f"called absent {100 * result.present_called_absent:.2f}% of {result.n}, absent called present "
+            f"{100 * result.absent_called_present:.2f}% of {result.absent_pairs} pairs"
+        )
 
 
 def _print_result(result: EvalResult, detailed: bool) -> None:
