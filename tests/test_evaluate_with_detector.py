@@ -79,6 +79,9 @@ def test_the_shipped_detector_and_planner_centre_twins_as_the_loop_shows_them(tw
     assert result.wrong_choice <= 2 and result.not_found <= N // 3, result
     assert result.matched_rank1 is not None and result.matched_rank1 >= 0.85, result
     assert result.rank1 == pytest.approx(result.matched_rank1 * (N - result.not_found) / N)
+    # The loop's "not in view" on one read: an absent kind is hardly ever taken (the detector finds none).
+    assert result.absent_called_present is not None and result.absent_called_present <= 0.05, result
+    assert result.present_called_absent is not None and result.present_called_absent >= result.not_found / N
     rows = load_index(twins).split("test")
     assert all(loop_query(r).attribute == r.targets[0].attribute is not None for r in rows)
 
@@ -86,6 +89,10 @@ def test_the_shipped_detector_and_planner_centre_twins_as_the_loop_shows_them(tw
 def test_no_detection_is_a_miss_and_the_wrong_twin_is_counted(twins: Path) -> None:
     blind = evaluate_with_detector(DEFAULT_CHECKPOINT, twins, BlindDetector())
     assert blind.n == N and blind.not_found == N and blind.rank1 == 0.0 and blind.twins_rank1 == 0.0
+    # Seeing nothing, the loop calls every present target absent and never takes an absent one.
+    assert (
+        blind.present_called_absent == 1.0 and blind.absent_called_present == 0.0 and blind.absent_pairs > 0
+    )
 
     fake = OtherTwinDetector(twins)
     assert 0 < len(fake.seen) < N  # some images show the twin, some do not
