@@ -11,7 +11,9 @@ stamp. As FFmpeg does, it is open only once the stream has given a frame that de
 Hostile or broken input is bounded: a part over `MAX_PART_BYTES`, a header line over
 `MAX_LINE_BYTES`, more than `MAX_HEADERS` headers or `MAX_SKIP_BYTES` of bytes that are no part end
 the stream (the camera's reconnect takes over); a part that does not decode is skipped, and
-`MAX_BAD_PARTS` of them in a row end the stream too. Every socket
+`MAX_BAD_PARTS` of them in a row end the stream too. A JPEG whose header says it is larger than
+`MAX_PIXELS` is not decoded (a few bytes can announce gigabytes of pixels), and opening must get its
+first frame within the open timeout in all, however slowly the bytes come. Every socket
 read is bounded by the read timeout; `release()` from another thread ends a blocked read.
 """
 
@@ -21,6 +23,7 @@ import contextlib
 import http.client
 import logging
 import socket
+import time
 from urllib.parse import urlsplit
 
 import cv2
@@ -35,6 +38,7 @@ MAX_LINE_BYTES = 4096
 MAX_HEADERS = 32
 MAX_SKIP_BYTES = 1024 * 1024
 MAX_BAD_PARTS = 30  # parts in a row that do not decode before the stream counts as broken
+MAX_PIXELS = 4096 * 4096  # a part showing a larger picture is not decoded (memory)
 
 
 class MjpegStreamError(Exception):
@@ -61,8 +65,11 @@ class MjpegParts:
         self._stream = stream
         self._boundary = boundary
         self._at_part = False  # the boundary before the next part was read already
+        self.deadline: float | None = None  # time.monotonic() past which reading fails (opening)
 
     def _line(self) -> bytes:
+        if self.deadline is not None and time.monotonic() > self.deadline:
+            raise MjpegStreamError("no frame within the open timeout")
         line = self._stream.readline(MAX_LINE_BYTES + 1)  # type: ignore[attr-defined]
         if not line:
             raise MjpegStreamError("the stream ended")
@@ -122,6 +129,32 @@ class MjpegParts:
         return body[:-2] if body.endswith(b"\r\n") else body
 
 
+def jpeg_size(data: bytes) -> tuple[int, int] | None:
+    """(width, height) from a JPEG's frame header (SOF0-SOF15 but DHT, JPG, DAC), None if none is found."""
+    if not data.startswith(b"\xff\xd8"):
+        return None
+    i = 2
+    while i + 9 <= len(data):
+        if data[i] != 0xFF:
+            return None
+        marker = data[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+            continue
+        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:  # no length
+            i += 2
+            continue
+        length = int.from_bytes(data[i + 2 : i + 4], "big")
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+            height = int.from_bytes(data[i + 5 : i + 7], "big")
+            width = int.from_bytes(data[i + 7 : i + 9], "big")
+            return width, height
+        if length < 2:
+            return None
+        i += 2 + length
+    return None
+
+
 class MjpegHttpCapture:
     """`cv2.VideoCapture`'s reading interface on an `http://` MJPEG URL, keeping each part's scene stamp."""
 
@@ -129,6 +162,7 @@ class MjpegHttpCapture:
         self.url = url
         self.scene_s: float | None = None
         self.skipped = 0  # parts that did not decode
+        self.oversized = 0  # of them, parts whose header announced more than MAX_PIXELS
         self._conn: http.client.HTTPConnection | None = None
         self._parts: MjpegParts | None = None
         self._first: tuple[np.ndarray, float | None] | None = None  # the frame that opened the stream
@@ -147,9 +181,11 @@ class MjpegHttpCapture:
                 raise MjpegStreamError(f"HTTP {response.status} {response.reason}")
             boundary = boundary_of(response.getheader("Content-Type", ""))
             self._parts = MjpegParts(response, boundary)
-            ok, bgr = self.read()  # within the open timeout
+            self._parts.deadline = time.monotonic() + open_timeout_s
+            ok, bgr = self.read()
             if not ok or bgr is None:
                 raise MjpegStreamError(f"no frame: {self.error}")
+            self._parts.deadline = None
             self._first = (bgr, self.scene_s)
             if conn.sock is not None:
                 conn.sock.settimeout(read_timeout_s)
@@ -178,7 +214,13 @@ class MjpegHttpCapture:
                 self.error = str(exc) or type(exc).__name__
                 log.debug("MJPEG %s: %s", self.url, self.error)
                 return False, None
-            bgr = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_COLOR)
+            size = jpeg_size(body)
+            fits = size is not None and 0 < size[0] * size[1] <= MAX_PIXELS
+            self.oversized += size is not None and not fits
+            try:
+                bgr = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_COLOR) if fits else None
+            except cv2.error:  # OpenCV refuses some broken pictures by raising
+                bgr = None
             if bgr is None:
                 self.skipped += 1
                 bad += 1

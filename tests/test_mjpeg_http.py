@@ -20,7 +20,15 @@ import pytest
 from drone_inspect_core.video_stamps import SCENE_STAMP_HEADER, parse_scene_stamp
 from perception.errors import CameraOpenError
 from perception.fresh_frame import is_fresh, read_fresh
-from perception.mjpeg_http import MAX_BAD_PARTS, MAX_PART_BYTES, MjpegParts, MjpegStreamError, boundary_of
+from perception.mjpeg_http import (
+    MAX_BAD_PARTS,
+    MAX_PART_BYTES,
+    MjpegHttpCapture,
+    MjpegParts,
+    MjpegStreamError,
+    boundary_of,
+    jpeg_size,
+)
 from perception.stream_camera import StreamCamera
 from perception.types import Frame
 from sim_world.rendering.mjpeg import MjpegServer
@@ -188,6 +196,59 @@ def test_a_stream_of_parts_that_never_decode_is_refused_not_read_forever() -> No
         thread.join()
         listener.close()
     assert sent.is_set()
+
+
+def _raw_server(parts: list[bytes], pause_s: float = 0.0) -> tuple[str, threading.Thread, socket.socket]:
+    """A server (a raw socket, named so) that answers one GET with an MJPEG header, then sends `parts`,
+    each `pause_s` after the last."""
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(1)
+
+    def serve() -> None:
+        conn, _ = listener.accept()
+        with conn, contextlib.suppress(OSError):
+            conn.recv(4096)
+            conn.sendall(b"HTTP/1.0 200 OK\r\nContent-Type: multipart/x-mixed-replace; boundary=xx\r\n\r\n")
+            for part in parts:
+                time.sleep(pause_s)
+                conn.sendall(part)
+            time.sleep(0.5)
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    return f"http://127.0.0.1:{listener.getsockname()[1]}/stream.mjpg", thread, listener
+
+
+def test_a_part_announcing_a_huge_picture_is_not_decoded_and_a_trickle_does_not_hold_the_open() -> None:
+    import cv2
+
+    good = cv2.imencode(".jpg", counter_image(7))[1].tobytes()
+    assert jpeg_size(good) == (96, 96)
+    sof = good.index(b"\xff\xc0")  # the baseline frame header: precision, then height and width
+    huge = good[: sof + 5] + (20000).to_bytes(2, "big") * 2 + good[sof + 9 :]
+    assert jpeg_size(huge) == (20000, 20000)  # 400 M pixels (1.2 GB decoded), announced in 4 bytes
+    part = b"--xx\r\nContent-Length: %d\r\n\r\n%s\r\n"
+    url, thread, listener = _raw_server([part % (len(huge), huge), part % (len(good), good)])
+    try:
+        capture = MjpegHttpCapture(url, open_timeout_s=2.0, read_timeout_s=2.0)
+        ok, bgr = capture.read()
+        assert ok and read_counter(bgr[:, :, ::-1]) == 7  # the huge one skipped, the next one read
+        assert capture.oversized == 1 and capture.skipped == 1  # refused by its header, never decoded
+        capture.release()
+    finally:
+        thread.join()
+        listener.close()
+
+    trickle = [bytes([b]) for b in b"--xx\r\nContent-Length: 100000\r\n\r\n" * 10]
+    url, thread, listener = _raw_server(trickle, pause_s=0.2)  # a byte every 0.2 s: no read times out
+    started = time.monotonic()
+    try:
+        with pytest.raises(CameraOpenError):
+            StreamCamera(url, timeout_s=2.0, open_timeout_s=1.0, scene_stamps=True, reconnect=False)
+        assert time.monotonic() - started < 3.0
+    finally:
+        listener.close()
 
 
 class FakeCamera:
