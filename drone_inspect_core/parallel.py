@@ -28,7 +28,6 @@ import os
 import pickle
 import secrets
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -37,6 +36,8 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from pathlib import Path
 from typing import Any, TypeVar
+
+from drone_inspect_core.ports import free_port
 
 log = logging.getLogger(__name__)
 
@@ -216,12 +217,6 @@ class RayExecutor(Executor):
         self._saved_env = {}
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 class LocalRayHead:
     """A private Ray head on 127.0.0.1 with `cpus` CPUs, run by `python -m drone_inspect_core.ray_head` (a
     watchdog
@@ -229,7 +224,7 @@ class LocalRayHead:
 
     def __init__(self, cpus: int) -> None:
         self.cpus = cpus
-        self.port = _free_port()
+        self.port = free_port("tcp")
         self.address = f"127.0.0.1:{self.port}"
         self.temp_dir = Path(tempfile.mkdtemp(prefix="ray-", dir="/tmp"))  # short: Ray's socket paths
         self.log_path = self.temp_dir / "head.log"

@@ -2,8 +2,9 @@
 
 A run that starts its own vehicle (sim-vehicle, PX4 SITL, ArduPilot SITL) takes ports nobody holds,
 checked before anything starts: where a program lets us, a socket binds port 0 and the kernel picks
-(nothing to race for); where a client needs a number first (MAVSDK's `udpin://`), `free_port` asks
-the kernel for one. A port a user fixes is checked with `check_free`, which names the port taken.
+(nothing to race for); where a client needs a number first (MAVSDK's `udpin://`), `free_port` draws
+one below the kernel's ephemeral range, where no port-0 socket of another process can take it. A port
+a user fixes is checked with `check_free`, which names the port taken.
 
 The fixed numbers below are conventions of other programs, not choices of ours: PX4 SITL instance N
 listens and sends on `base + N`, as its own start scripts say.
@@ -12,8 +13,10 @@ listens and sends on `base + N`, as its own start scripts say.
 from __future__ import annotations
 
 import errno
+import random
 import socket
 from collections.abc import Iterable
+from pathlib import Path
 from typing import Literal
 
 Protocol = Literal["udp", "tcp"]
@@ -48,12 +51,38 @@ class PortInUseError(OSError):
     """A port a run needs is held by another program; the message names it."""
 
 
+CHOSEN_PORTS = (20000, 32768)
+"""Where `free_port` looks first: above every fixed port here, below Linux's ephemeral range."""
+EPHEMERAL_RANGE_FILE = Path("/proc/sys/net/ipv4/ip_local_port_range")
+
+
 def free_port(protocol: Protocol = "udp", host: str = LOOPBACK) -> int:
-    """A port on `host` that nobody holds now (the kernel's pick)."""
+    """A port on `host` that nobody holds now, for a client that must be told a number before it binds.
+
+    A port the kernel hands out for "port 0" could be handed to any other process's socket in the moment
+    before the client binds it (MAVSDK once failed with BIND_ERROR that way, under a parallel test run).
+    So the port is drawn at random below the kernel's ephemeral range (`CHOSEN_PORTS`, where the kernel
+    never picks) and checked free; only where that range cannot be read or holds nothing free is it the
+    kernel's pick."""
+    low, high = CHOSEN_PORTS
+    high = min(high, _ephemeral_low())
+    draw = random.SystemRandom()
+    for _ in range(64 if high - low > 1000 else 0):
+        port = draw.randrange(low, high)
+        if is_free(port, protocol, host):
+            return port
     kind = socket.SOCK_DGRAM if protocol == "udp" else socket.SOCK_STREAM
     with socket.socket(socket.AF_INET, kind) as sock:
         sock.bind((host, 0))
         return int(sock.getsockname()[1])
+
+
+def _ephemeral_low() -> int:
+    """The lowest port of the kernel's ephemeral range (0: unknown, so `free_port` asks the kernel)."""
+    try:
+        return int(EPHEMERAL_RANGE_FILE.read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 0
 
 
 def is_free(port: int, protocol: Protocol = "udp", host: str = LOOPBACK) -> bool:

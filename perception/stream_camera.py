@@ -30,6 +30,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -65,6 +66,9 @@ class StreamCamera(Camera):
     `reconnect`: reopen a live source after it drops (False: `CameraStreamEndedError`).
     `scene_stamps`: the source is an http:// MJPEG stream of a simulator on this host; its parts'
     scene stamps are this host's clock and become `Frame.scene_s` (see `drone_inspect_core.video_stamps`).
+    `source_alive`: whether the process serving the stream still runs (a simulator the caller started);
+    a stream that drops once it has exited ends at once (`CameraStreamEndedError`) instead of `read()`
+    waiting out its timeout for a reconnect that cannot come.
     """
 
     def __init__(
@@ -75,6 +79,7 @@ class StreamCamera(Camera):
         realtime_file: bool = True,
         reconnect: bool = True,
         scene_stamps: bool = False,
+        source_alive: Callable[[], bool] | None = None,
     ) -> None:
         if timeout_s <= 0 or open_timeout_s <= 0:
             raise ValueError(
@@ -89,6 +94,7 @@ class StreamCamera(Camera):
         if scene_stamps and not (isinstance(source, str) and source.startswith("http://")):
             raise ValueError(f"scene stamps come only with an http:// MJPEG stream, not {self.name}")
         self._scene_stamps = scene_stamps
+        self._source_alive = source_alive
         self._open_error: str | None = None
         if self._is_file and not Path(str(source)).is_file():
             raise CameraOpenError(self.name, "no such video file")
@@ -113,6 +119,9 @@ class StreamCamera(Camera):
         if self._open_failed:
             raise CameraOpenError(self.name, self._open_error or _OPEN_HINT)
         log.info("camera %s open", self.name)
+
+    def _source_gone(self) -> bool:
+        return self._source_alive is not None and not self._source_alive()
 
     def _capture(self) -> cv2.VideoCapture | MjpegHttpCapture:
         if self._scene_stamps:
@@ -140,6 +149,9 @@ class StreamCamera(Camera):
                             if isinstance(cap, MjpegHttpCapture):
                                 self._open_error = f"{cap.error}; is the simulator's stream up?"
                             return
+                        if self._source_gone():
+                            self._frames.end(CameraStreamEndedError(self.name, "its source has exited"))
+                            return
                         self._stop.wait(_RECONNECT_BACKOFF_S)
                         continue
                     if self._opened.is_set():
@@ -156,6 +168,11 @@ class StreamCamera(Camera):
                 what = "end of file" if self._is_file else "stream dropped or stalled"
                 reason = f"{what} after {number} frames"
                 with self._cond:
+                    if self._source_gone():  # nothing will serve it again: say so now, not at a timeout
+                        self._frames.end(
+                            CameraStreamEndedError(self.name, f"{reason}; its source has exited")
+                        )
+                        return
                     if self._reconnect:
                         self._dropped = f"{reason}; reconnecting"
                     else:

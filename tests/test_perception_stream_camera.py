@@ -180,3 +180,29 @@ def test_video_file_ends_with_stream_ended(tmp_path: Path) -> None:
             while True:
                 seen.append(read_counter(cam.read().image))
         assert seen[-1] == 4
+
+
+@pytest.mark.parametrize("stamped", [False, True])
+def test_a_stream_whose_source_has_exited_ends_at_once_instead_of_waiting_out_the_timeout(
+    stamped: bool,
+) -> None:
+    alive = True
+    server = MjpegServer(port=0)
+    try:
+        with publishing(server):
+            cam = StreamCamera(
+                server.stream_url,
+                timeout_s=5.0,
+                open_timeout_s=3.0,
+                scene_stamps=stamped,
+                source_alive=lambda: alive,
+            )
+            cam.read()
+    finally:
+        alive = False  # the simulator serving it has exited, and its stream with it
+        server.close()
+    started = time.monotonic()
+    with cam, pytest.raises(CameraStreamEndedError, match="source has exited"):
+        while True:  # frames already in hand first, then the end
+            cam.read()
+    assert time.monotonic() - started < 2.0  # not the 5 s read timeout

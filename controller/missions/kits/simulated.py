@@ -202,7 +202,13 @@ def stream_camera_for(stack: ExitStack, sim: SimulatorProcess, mission: Mission)
     vehicle's stream is."""
     stamps = off_real_time(simulator_speed(mission))
     return stack.enter_context(
-        StreamCamera(sim.ready["video_url"], timeout_s=3.0, open_timeout_s=10.0, scene_stamps=stamps)
+        StreamCamera(
+            sim.ready["video_url"],
+            timeout_s=3.0,
+            open_timeout_s=10.0,
+            scene_stamps=stamps,
+            source_alive=lambda: sim.alive,
+        )
     )
 
 
