@@ -66,11 +66,12 @@ def free_port(protocol: Protocol = "udp", host: str = LOOPBACK) -> int:
     kernel's pick."""
     low, high = CHOSEN_PORTS
     high = min(high, _ephemeral_low())
-    draw = random.SystemRandom()
-    for _ in range(64 if high - low > 1000 else 0):
-        port = draw.randrange(low, high)
-        if is_free(port, protocol, host):
-            return port
+    if high - low > 1000:
+        draw = random.SystemRandom()
+        for _ in range(64):
+            port = draw.randrange(low, high)
+            if is_free(port, protocol, host):
+                return port
     kind = socket.SOCK_DGRAM if protocol == "udp" else socket.SOCK_STREAM
     with socket.socket(socket.AF_INET, kind) as sock:
         sock.bind((host, 0))

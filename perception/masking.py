@@ -17,6 +17,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from perception.types import Detection
+
 GROW = 1.2
 """Each painted box is the detection's, its half-axes times this (a detector box may miss the rim)."""
 RING = 1.6
@@ -43,6 +45,12 @@ def paint_over(image: np.ndarray, boxes: Sequence[tuple[float, float, float, flo
             continue
         out[b:d, a:c] = np.median(pixels, axis=0).astype(image.dtype)
     return out
+
+
+def paint_over_twins(image: np.ndarray, chosen: Detection, detections: Sequence[Detection]) -> np.ndarray:
+    """`image` with the detections of `chosen`'s kind other than `chosen` painted over: the picture the
+    planner sees (the centring loop's, and `dronectl evaluate --with-detector`'s)."""
+    return paint_over(image, [d.bbox_px for d in detections if d is not chosen and d.kind == chosen.kind])
 
 
 def _window(

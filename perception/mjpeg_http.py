@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import http.client
+import io
 import logging
 import socket
 import time
@@ -61,7 +62,7 @@ def boundary_of(content_type: str) -> bytes:
 class MjpegParts:
     """The parts of a multipart body read from a binary file object: `next_part()` → (headers, body)."""
 
-    def __init__(self, stream: object, boundary: bytes) -> None:
+    def __init__(self, stream: io.BufferedIOBase, boundary: bytes) -> None:
         self._stream = stream
         self._boundary = boundary
         self._at_part = False  # the boundary before the next part was read already
@@ -70,7 +71,7 @@ class MjpegParts:
     def _line(self) -> bytes:
         if self.deadline is not None and time.monotonic() > self.deadline:
             raise MjpegStreamError("no frame within the open timeout")
-        line = self._stream.readline(MAX_LINE_BYTES + 1)  # type: ignore[attr-defined]
+        line = self._stream.readline(MAX_LINE_BYTES + 1)
         if not line:
             raise MjpegStreamError("the stream ended")
         if len(line) > MAX_LINE_BYTES:
@@ -110,7 +111,7 @@ class MjpegParts:
             raise MjpegStreamError(f"a part's Content-Length is not a number: {length!r}") from None
         if not 0 < size <= MAX_PART_BYTES:
             raise MjpegStreamError(f"a part of {size} bytes (at most {MAX_PART_BYTES})")
-        body = self._stream.read(size)  # type: ignore[attr-defined]
+        body = self._stream.read(size)
         if len(body) < size:
             raise MjpegStreamError("the stream ended inside a part")
         return headers, body

@@ -78,8 +78,6 @@ def _quantiles(values: list[float]) -> dict[str, float]:
     }  # fmt: skip
 
 
-
-
 def run_console_bench(settings: ConsoleBenchSettings) -> ConsoleBenchResult:
     """Open the console and a page, measure the video, take off, measure `holds` Holds."""
     rng = random.Random(settings.seed)

@@ -411,4 +411,3 @@ class Pilot:
             if thread.is_alive():
                 thread.join(JOIN_TIMEOUT_S)
         self._commands.shutdown(wait=True, cancel_futures=False)
-

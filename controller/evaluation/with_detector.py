@@ -11,7 +11,7 @@ goes through the same steps:
    target of that kind (twins: an operator must name the colour; elsewhere the kind is enough);
 2. the detector's detections (`perception.detector.detect_all`) and the one the loop takes
    (`grounding.select_target`);
-3. the other detections of its kind painted over (`perception.masking.paint_over`);
+3. the other detections of its kind painted over (`perception.masking.paint_over_twins`, as the loop);
 4. the planner asked in its trained words (`grounding.planner_instruction`) through the adapter the loop
    uses (`LatentPlannerAdapter`, mirror test-time augmentation as its checkpoint says).
 
@@ -36,11 +36,11 @@ import numpy as np
 
 from controller.planning.actions import label_from_offset
 from controller.planning.grounding import TargetQuery, planner_instruction, presence_query, select_target
-from controller.planning.planners import LatentPlannerAdapter, Observation
+from controller.planning.planners import LatentPlannerAdapter, Observation, Plan
 from controller.training.data import Row, load_index
 from drone_inspect_core.dataset import read_image_rgb
 from perception.detector import Detector, detect_all
-from perception.masking import paint_over
+from perception.masking import paint_over_twins
 from perception.types import Detection
 
 
@@ -114,20 +114,19 @@ def evaluate_with_detector(
             if not any(t.in_view and t.kind == kind for t in row.targets):
                 absent_pairs += 1
                 absent_taken += _found(planner, image, detections, TargetQuery(kind), eps)
-        present_missed += not _found(planner, image, detections, query, eps)
         chosen = select_target(detections, query)
         named_twins = query.attribute is not None
         twins += named_twins
         if chosen is None:
             not_found += 1
+            present_missed += 1
             continue
         wrong += _took_another(chosen, row, width, height)
-        others = [d.bbox_px for d in detections if d is not chosen and d.kind == chosen.kind]
-        observation = Observation(
-            paint_over(image, others), chosen, planner_instruction(query), eps, None, detections
-        )
-        action = planner.plan(observation).action
-        hit = action.index == label_from_offset(row.offset_px[0], row.offset_px[1], eps).index
+        picture = paint_over_twins(image, chosen, detections)
+        words = planner_instruction(query)
+        plan = planner.plan(Observation(picture, chosen, words, eps, None, detections))
+        present_missed += not _in_view(planner, picture, chosen, detections, query, eps, (words, plan))
+        hit = plan.action.index == label_from_offset(row.offset_px[0], row.offset_px[1], eps).index
         hits += hit
         twin_hits += hit and named_twins
     return WithDetectorResult(
@@ -154,12 +153,29 @@ def _found(
     eps: float,
 ) -> bool:
     """Whether the loop takes a detection for `query`'s target on this read: one matches it, and the
-    planner, asked by kind on the picture it would see (`CentringLoop._confirm`), does not say the kind
-    is out of view."""
+    planner does not say its kind is out of view (`_in_view`)."""
     chosen = select_target(detections, query)
     if chosen is None:
         return False
-    others = [d.bbox_px for d in detections if d is not chosen and d.kind == chosen.kind]
-    asked = planner_instruction(presence_query(query, chosen))
-    plan = planner.plan(Observation(paint_over(image, others), chosen, asked, eps, None, detections))
+    picture = paint_over_twins(image, chosen, detections)
+    return _in_view(planner, picture, chosen, detections, query, eps)
+
+
+def _in_view(
+    planner: LatentPlannerAdapter,
+    picture: np.ndarray,
+    chosen: Detection,
+    detections: tuple[Detection, ...],
+    query: TargetQuery,
+    eps: float,
+    asked: tuple[str, Plan] | None = None,
+) -> bool:
+    """Whether the planner, asked by kind on the picture it sees (`CentringLoop._confirm`), does not say
+    the kind is out of view; `asked`: words the planner was already asked on this picture, and its plan
+    (used again when they are the kind's words)."""
+    words = planner_instruction(presence_query(query, chosen))
+    if asked is not None and asked[0] == words:
+        plan = asked[1]
+    else:
+        plan = planner.plan(Observation(picture, chosen, words, eps, None, detections))
     return plan.in_view is not False

@@ -141,7 +141,7 @@ from perception.camera import Camera
 from perception.detector import Detector, detect_all
 from perception.errors import CameraFrozenError
 from perception.fresh_frame import read_fresh
-from perception.masking import paint_over
+from perception.masking import paint_over_twins
 from perception.types import Detection, Frame
 
 log = logging.getLogger(__name__)
@@ -299,8 +299,7 @@ class CentringLoop:
         chosen = record.detection
         if not self.config.paint_over_twins or chosen is None:
             return record.frame.image
-        twins = [d.bbox_px for d in record.detections if d is not chosen and d.kind == chosen.kind]
-        return paint_over(record.frame.image, twins)
+        return paint_over_twins(record.frame.image, chosen, record.detections)
 
     def _colour_read_enough(self, record: StepRecord, state: _RunState) -> bool:
         """Before the target is found, its detection on this read: whether `colour_reads` reads in a row

@@ -328,15 +328,15 @@ class _PendingWorld:
     def __init__(self) -> None:
         self.key: tuple[WorldConfig, int] | None = None
         self.world: World | None = None
-        self.error: str | None = None
+        self.error: Exception | None = None
 
     def build(self, world_config: WorldConfig, seed: int) -> None:
         self.close()
         self.key = (world_config, seed)
         try:
             self.world = World(world_config, seed)
-        except Exception as exc:
-            self.error = f"cannot build the world: {exc}"
+        except Exception as exc:  # said when the reset comes for it
+            self.error = exc
 
     def take(self, world_config: WorldConfig, seed: int) -> World | None:
         """The world built ahead if it is this one (a build that failed raises its error); else None."""
@@ -346,7 +346,7 @@ class _PendingWorld:
         world, error = self.world, self.error
         self.key, self.world, self.error = None, None, None
         if error is not None:
-            raise RuntimeError(error)
+            raise error
         return world
 
     def close(self) -> None:
@@ -366,14 +366,16 @@ def _reset(
     """Build the world a reset asks for (or take the one built ahead) and publish its first frame; the old
     scene stays on error."""
     _, world_config, seed, origin_enu_m, faults = command
+    world: World | None = None
     try:
         world = pending.take(world_config, seed)
         ahead = world is not None
-        fresh = _Scene(world if world is not None else World(world_config, seed), origin_enu_m, faults)
+        world = world if world is not None else World(world_config, seed)
+        fresh = _Scene(world, origin_enu_m, faults)
     except Exception as exc:
-        conn.send(
-            ("reset-error", str(exc) if str(exc).startswith("cannot") else f"cannot build the world: {exc}")
-        )
+        if world is not None:
+            world.close()
+        conn.send(("reset-error", f"cannot build the world: {exc}"))
         return scene
     scene.world.close()
     fresh.draw(*_read_pose(pose), server=server)
