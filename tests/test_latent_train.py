@@ -240,3 +240,39 @@ def test_mirror_tta_swaps_left_and_right_and_treats_an_image_and_its_mirror_alik
     assert flipped.predictions == MIRRORED_ACTION[torch.tensor(plain.predictions)].tolist()
     assert flipped.rank1 == plain.rank1
     assert evaluate_loaded(ckpt, data, instructions=words).instructions == "train"  # off unless asked
+
+
+def test_the_global_shifts_start_at_the_chosen_spread_from_the_same_draws() -> None:
+    """`shift_init_std` scales g_X, g_Z's initial draws and nothing else: at the default the model is
+    built exactly as it always was (checkpoints and seeds reproduce), at 0.5 the same draws × 50."""
+    from controller.planning.latent.config import SHIFT_INIT_STD
+    from controller.planning.latent.model import LatentDynamicsModel
+
+    cfg = ModelConfig(image_size=32, base_width=4, latent_dim=16, text_heads=2)
+    torch.manual_seed(3)
+    plain = LatentDynamicsModel(cfg).state_dict()
+    torch.manual_seed(3)
+    wide = LatentDynamicsModel(cfg, shift_init_std=0.5).state_dict()
+    for name, value in plain.items():
+        expected = value * (0.5 / SHIFT_INIT_STD) if name in ("global_x", "global_z") else value
+        torch.testing.assert_close(wide[name], expected, msg=name)
+    assert float(wide["global_x"].std()) > 0.2 > 0.02 > float(plain["global_x"].std())
+    assert TrainConfig().shift_init_std == SHIFT_INIT_STD
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="shift_init_std"):
+            TrainConfig(shift_init_std=bad)
+
+
+def test_train_uses_the_configured_shift_spread(synthetic: Path, tmp_path: Path) -> None:
+    """The trainer builds its model with `TrainConfig.shift_init_std` (one epoch at lr 1e-9 leaves the
+    shifts where they started)."""
+    from safetensors.torch import load_file
+
+    model_cfg = ModelConfig(image_size=64, base_width=4, latent_dim=16, text_heads=2)
+    spreads = {}
+    for std in (0.01, 1.0):
+        out = tmp_path / f"s{std}"
+        cfg = TrainConfig(epochs=1, learning_rate=1e-9, threads=1, shift_init_std=std)
+        train(synthetic, out, model_cfg, cfg, progress=False)
+        spreads[std] = float(load_file(out / "model.safetensors")["global_x"].std())
+    assert spreads[0.01] < 0.05 and spreads[1.0] > 0.4, spreads

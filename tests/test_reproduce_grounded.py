@@ -95,7 +95,10 @@ def test_grounded_reproduction_trains_each_seed_once_and_reports(tmp_path: Path)
     two = write_synthetic_dataset(tmp_path / "two", n_goal=16, n_train=64, n_test=24, seed=2, targets=2)
     look = write_synthetic_dataset(tmp_path / "look", n_goal=4, n_train=8, n_test=16, seed=3, targets=2)
     out = tmp_path / "report"
-    report = reproduce_grounded([one, two], [one, two], look, out, seeds=2, epochs=1, model_overrides=TINY)
+    report = reproduce_grounded(
+        [one, two], [one, two], look, out, seeds=2, epochs=1, model_overrides=TINY,
+        train_overrides={"shift_init_std": 0.25},
+    )  # fmt: skip
     text = report.read_text()
     assert "| one (" in text and "| two (" in text and f"| {LOOK} (" in text and text.count("gap:") == 4
     assert "## With its mirror image" in text  # every test set also scored as the planner can run
@@ -104,6 +107,9 @@ def test_grounded_reproduction_trains_each_seed_once_and_reports(tmp_path: Path)
     assert set(data["seeds"][0]["tests"]) == set(data["seeds"][0]["tests_mirror"]) == {"one", "two", LOOK}
     assert {"look_gap", "look_gap_kind", "look_gap_mirror", "look_gap_mirror_kind"} <= set(data["summary"])
     assert data["seeds"][0]["epochs"] == 1
+    assert data["seeds"][1]["train_overrides"] == {"shift_init_std": 0.25}  # the recipe under test, trained
+    run_config = json.loads((out / "runs" / "grounded_s1" / "config.json").read_text())
+    assert run_config["train"]["shift_init_std"] == 0.25
     # A second call reuses both seeds: it needs no training data, and changes nothing recorded.
     before = (out / "runs" / "grounded_s0" / "eval.json").read_text()
     (out / "runs" / "grounded_s1" / "eval.json").unlink()  # seed 1: trained, not yet evaluated
@@ -113,3 +119,10 @@ def test_grounded_reproduction_trains_each_seed_once_and_reports(tmp_path: Path)
     assert again == report
     assert (out / "runs" / "grounded_s0" / "eval.json").read_text() == before
     assert json.loads((out / "grounded.json").read_text())["seeds"][1]["tests"]["two"]["n"] == 24
+
+
+def test_a_recipe_override_is_refused_outside_the_grounded_experiment(tmp_path: Path) -> None:
+    from dronectl.reproduce_cmd import main
+
+    with pytest.raises(SystemExit, match="--shift-init-std is for --experiments grounded"):
+        main(["--data", str(tmp_path), "--out", str(tmp_path / "out"), "--shift-init-std", "0.5"])

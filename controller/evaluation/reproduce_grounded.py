@@ -54,6 +54,8 @@ class GroundedJob:
     threads: int
     model_overrides: tuple[tuple[str, Any], ...] = ()
     """Changes to the preset's model (tests use a tiny one); empty for the real experiment."""
+    train_overrides: tuple[tuple[str, Any], ...] = ()
+    """Changes to the preset's training (a recipe under test, e.g. `shift_init_std`); empty: the preset's."""
 
 
 def named_test_sets(tests: Sequence[Path], heldout_look: Path | None) -> tuple[tuple[str, Path], ...]:
@@ -85,6 +87,7 @@ def run_grounded_job(job: GroundedJob) -> dict[str, Any]:
             epochs=job.epochs,
             threads=job.threads,
             model_overrides=dict(job.model_overrides),
+            train_overrides=dict(job.train_overrides),
         )
         if (kept := set_aside(job.run_dir)) is not None:  # an interrupted run: kept, and trained afresh
             log.warning("%s was not finished: kept as %s, training it again", job.run_dir, kept)
@@ -95,6 +98,7 @@ def run_grounded_job(job: GroundedJob) -> dict[str, Any]:
         "train_seconds": metrics["seconds"],
         "epochs": metrics["train"]["epochs"],
         "best_val_accuracy": metrics["best_val_accuracy"],
+        "train_overrides": dict(job.train_overrides),
     }
     for key, _, _ in MODES:
         summary[key] = {}
@@ -159,6 +163,7 @@ def reproduce_grounded(
     total_threads: int = 2,
     ray: str | None = None,
     model_overrides: dict[str, Any] | None = None,
+    train_overrides: dict[str, Any] | None = None,
 ) -> Path:
     """Run `seeds` seeds and write `out_dir/grounded.md` (and `grounded.json`); returns the report's path."""
     from controller.evaluation.reproduce import ReproduceTaskError, run_jobs
@@ -169,7 +174,8 @@ def reproduce_grounded(
     jobs = [
         GroundedJob(seed, tuple(Path(d) for d in train_dirs), named_tests,
                     out_dir / "runs" / f"grounded_s{seed}", epochs, threads,
-                    tuple(sorted((model_overrides or {}).items())))
+                    tuple(sorted((model_overrides or {}).items())),
+                    tuple(sorted((train_overrides or {}).items())))
         for seed in range(seeds)
     ]  # fmt: skip
     results, failed = run_jobs(jobs, run_grounded_job, lambda job: f"seed {job.seed}", workers, ray, "seeds")

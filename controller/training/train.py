@@ -191,7 +191,7 @@ def _fit(
     else:
         tokenizer = InstructionTokenizer.train(text_corpus, model_cfg.vocab_size, model_cfg.max_tokens)
         model_cfg = replace(model_cfg, vocab_size=tokenizer.vocab_size)
-        model = LatentDynamicsModel(model_cfg)
+        model = LatentDynamicsModel(model_cfg, cfg.shift_init_std)
     model = model.to(dev, memory_format=torch.channels_last if cfg.channels_last else torch.preserve_format)
     rng = np.random.default_rng(cfg.seed)
     sampler: _InstructionSampler | DescriptionSampler

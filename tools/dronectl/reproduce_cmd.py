@@ -44,6 +44,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--heldout-look", type=Path, default=None, help="grounded: the held-out scene family's test folder"
     )
     p.add_argument("--epochs", type=at_least(1), default=None, help="override the preset's epochs")
+    p.add_argument(
+        "--shift-init-std",
+        type=float,
+        default=None,
+        help="grounded: override the preset's spread of g_X, g_Z at initialisation (a recipe under test)",
+    )
     return p
 
 
@@ -57,6 +63,8 @@ def main(argv: list[str]) -> int:
         )
     if args.experiments == "grounded" and not (args.test or args.heldout_look):
         raise SystemExit("dronectl reproduce: --experiments grounded needs --test and/or --heldout-look")
+    if args.shift_init_std is not None and args.experiments != "grounded":
+        raise SystemExit("dronectl reproduce: --shift-init-std is for --experiments grounded")
     if args.threads < 1:
         raise SystemExit(f"dronectl reproduce: --threads must be >= 1, got {args.threads}")
     from drone_inspect_core.dataset import load_manifest
@@ -79,6 +87,9 @@ def main(argv: list[str]) -> int:
                 epochs=args.epochs,
                 total_threads=args.threads,
                 ray=args.ray,
+                train_overrides={}
+                if args.shift_init_std is None
+                else {"shift_init_std": args.shift_init_std},
             )
             print(f"report: {path}")
             return 0

@@ -103,6 +103,12 @@ def build_parser() -> argparse.ArgumentParser:
         default="cpu",
         help="where the model trains: cpu (default), cuda, cuda:N, or auto (a GPU if torch sees one)",
     )
+    p.add_argument(
+        "--shift-init-std",
+        type=float,
+        default=None,
+        help="spread of the global action shifts g_X, g_Z at initialisation (default 0.01)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -132,6 +138,7 @@ def main(argv: list[str]) -> int:
         ema_decay=args.ema,
         balance_kinds=on[args.balance_kinds],
         epsilon_px=args.epsilon_px,
+        shift_init_std=args.shift_init_std,
     )
     aug_over = _given(
         translate=args.translate,

@@ -23,6 +23,9 @@ CONDITIONINGS: tuple[str, ...] = ("none", "film")
 POOLINGS: tuple[str, ...] = ("gap", "flatten", "keypoints")
 
 DISTANCES: tuple[str, ...] = ("cosine", "euclidean", "both")
+SHIFT_INIT_STD = 0.01
+"""The spread of the global shifts g_X, g_Z at initialisation as the model has always been built (the
+paper does not give one); a training choice (`TrainConfig.shift_init_std`), not a shape."""
 GOAL_PROTOTYPE_RULE = "z*(instr) = fuse(mean_i E_img(goal_i), E_inst(instr)); goal mean stored in checkpoint"
 
 

@@ -22,7 +22,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from controller.planning.actions import NUM_ACTIONS
-from controller.planning.latent.config import ModelConfig
+from controller.planning.latent.config import SHIFT_INIT_STD, ModelConfig
 from controller.planning.latent.image_encoder import ImageEncoder
 from controller.planning.latent.text_encoder import TextEncoder
 
@@ -43,7 +43,9 @@ def distance(a: torch.Tensor, b: torch.Tensor, kind: str) -> torch.Tensor:
 
 
 class LatentDynamicsModel(nn.Module):
-    def __init__(self, config: ModelConfig) -> None:
+    def __init__(self, config: ModelConfig, shift_init_std: float = SHIFT_INIT_STD) -> None:
+        """`shift_init_std`: the spread of the global shifts g_X, g_Z at initialisation (a training
+        choice, `TrainConfig.shift_init_std`; the same random draws whatever it is)."""
         super().__init__()
         self.config = config
         d = config.latent_dim
@@ -85,8 +87,8 @@ class LatentDynamicsModel(nn.Module):
             self.presence = nn.Sequential(nn.Linear(d, 64), nn.ReLU(), nn.Linear(64, 1))
         self.global_x = nn.Parameter(torch.zeros(3, d))  # g_X
         self.global_z = nn.Parameter(torch.zeros(3, d))  # g_Z
-        nn.init.normal_(self.global_x, std=0.01)
-        nn.init.normal_(self.global_z, std=0.01)
+        nn.init.normal_(self.global_x, std=shift_init_std)
+        nn.init.normal_(self.global_z, std=shift_init_std)
         self.register_buffer("action_x_index", ACTION_X.clone(), persistent=False)
         self.register_buffer("action_z_index", ACTION_Z.clone(), persistent=False)
 
