@@ -86,8 +86,11 @@ def test_the_shipped_detector_and_planner_centre_twins_as_the_loop_shows_them(tw
     assert all(loop_query(r).attribute == r.targets[0].attribute is not None for r in rows)
 
 
-def test_no_detection_is_a_miss_and_the_wrong_twin_is_counted(twins: Path) -> None:
-    blind = evaluate_with_detector(DEFAULT_CHECKPOINT, twins, BlindDetector())
+def test_no_detection_is_a_miss_and_the_wrong_twin_is_counted(
+    twins: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(twins.parent)  # the folder named relative to where the command runs
+    blind = evaluate_with_detector(DEFAULT_CHECKPOINT, Path(twins.name), BlindDetector())
     assert blind.n == N and blind.not_found == N and blind.rank1 == 0.0 and blind.twins_rank1 == 0.0
     # Seeing nothing, the loop calls every present target absent and never takes an absent one.
     assert (

@@ -194,15 +194,31 @@ def judge_presence(
     )
 
 
-def choose_threshold(p_present: np.ndarray, p_absent: np.ndarray, max_false_absent: float) -> float:
-    """The highest threshold that calls at most `max_false_absent` of the present pairs absent (so the
-    most absent pairs absent for that budget), on validation pairs. A present pair is called absent
-    when its p lies below the threshold: the threshold is the present scores' quantile, nudged down
-    onto the midpoint to the next lower score."""
-    if not 0.0 <= max_false_absent < 1.0 or len(p_present) == 0:
-        raise ValueError("choose_threshold needs present pairs and a budget in [0, 1)")
-    scores = np.sort(np.asarray(p_present, dtype=np.float64))
-    allowed = int(np.floor(max_false_absent * len(scores)))  # present pairs that may fall below
-    if allowed == 0:
-        return float(scores[0] / 2.0)
-    return float((scores[allowed - 1] + scores[allowed]) / 2.0)
+def fewest_errors_threshold(present: Sequence[float | None], absent: Sequence[float | None]) -> float:
+    """The threshold at which the loop's decision makes the fewest wrong calls on validation pairs: the
+    share of present pairs called absent plus the share of absent pairs called present
+    (`with_detector.called_absent`: a pair with `None`, no matching detection, is absent whatever the
+    threshold). The error changes only at the pairs' scores; of the runs of thresholds that give the
+    fewest, the widest, and its middle: as far from the present scores below it as from the absent
+    ones above."""
+    if len(present) == 0 or len(absent) == 0:
+        raise ValueError("fewest_errors_threshold needs present and absent pairs")
+    p = np.array([x for x in present if x is not None], dtype=np.float64)
+    a = np.array([x for x in absent if x is not None], dtype=np.float64)
+    edges = np.unique(np.concatenate([[0.0, 1.0], p, a]))  # the error is constant on (edges[i], edges[i+1]]
+    lows, highs = edges[:-1], edges[1:]
+    missed = (len(present) - len(p)) + (p[None, :] < highs[:, None]).sum(axis=1)  # threshold in (low, high]
+    taken = (a[None, :] >= highs[:, None]).sum(axis=1)
+    error = missed / len(present) + taken / len(absent)
+    best = np.isclose(error, error.min(), rtol=0.0, atol=1e-12)
+    start = width = best_start = best_end = 0.0
+    for low, high, ok in zip(lows, highs, best, strict=True):  # the widest run of best intervals
+        if not ok:
+            width = 0.0
+            continue
+        if width == 0.0:
+            start = low
+        width = high - start
+        if width > best_end - best_start:
+            best_start, best_end = start, high
+    return float((best_start + best_end) / 2.0)

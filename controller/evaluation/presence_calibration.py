@@ -1,18 +1,26 @@
-"""Calibrating "not in view": the presence threshold chosen on validation scenes, written to a checkpoint.
+"""Calibrating "not in view": the presence threshold chosen on validation scenes as the loop decides,
+written to a checkpoint.
 
-The latent planner's presence head gives p(asked-for target in view). At p = 0.5 it called most
-absent pairs present, so the loop could not use it. `calibrate_presence` chooses, on validation
-folders only (scenes neither the training nor the test sets drew), the highest threshold that calls
-at most `max_false_absent` of the present pairs absent (`presence.choose_threshold`), and
-`write_presence_threshold` stores it in the checkpoint's config.json (`planner.presence_threshold`,
-with a record of how it was chosen). What flies reads that one number
-(`controller.planning.latent.planner.LatentPlanner.presence_threshold`); held-out figures come from
-`dronectl evaluate --as-flown` on test folders, never from the folders it was chosen on.
+The centring loop takes a detection for the named target only when the detector sees one of its kind
+(among twins, of its colour) and the latent planner's presence head, asked by the kind alone on the
+picture it would see (the other targets of that kind painted over), gives p(in view) at or above the
+checkpoint's threshold (`controller.planning.loop`, `CentringLoop._confirm`). `calibrate_presence`
+makes exactly those reads on validation folders (scenes neither the training nor the test sets drew)
+through `with_detector.evaluate_with_detector`: each test image for its named target, and for every
+kind none of its targets has. It chooses the threshold at which the loop makes the fewest wrong calls
+there: present targets called absent plus absent ones called present, each as a share of its pairs
+(`presence.fewest_errors_threshold`). A pair the detector matches nothing for is absent whatever the
+threshold: the head is asked only where the detector matched, so its threshold is chosen on those
+reads, and the detector it was chosen with is recorded beside it. `write_presence_threshold` stores the
+threshold in the checkpoint's config.json (`planner.presence_threshold`, with how it was chosen). What
+flies reads that one number (`controller.planning.latent.planner.LatentPlanner.presence_threshold`);
+held-out figures come from `dronectl evaluate --with-detector` on test folders, never from the folders
+it was chosen on.
 
-The pairs are asked as the loop asks before it takes a detection for the target
-(`presence.kind_presence_pairs`: by the kind alone, in the planner's words, with the mirror image
-where the checkpoint's planner mirrors): each test image for its named target's kind, for every kind
-none of its targets has, and each `empty` image for its named target's kind.
+Until 2026-11-27 the threshold was chosen on the head alone (every pair, as if the detector had matched
+each): the highest that called at most 2 % of present pairs absent, 0.951. The head then turned away
+4 to 18 % of the present targets the detector had found on held-out sets, while the detector alone
+already took 0-2 % of the absent kinds (docs/targets.md, "Not in view").
 """
 
 from __future__ import annotations
@@ -24,23 +32,18 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from controller.evaluation.presence import (
-    PresenceResult,
-    choose_threshold,
-    judge_presence,
-    kind_presence_pairs,
-)
-from controller.planning.latent.checkpoint import LoadedCheckpoint, load_checkpoint, write_planner_settings
+from controller.evaluation.presence import fewest_errors_threshold
+from controller.evaluation.with_detector import evaluate_with_detector, loop_rates
+from controller.planning.latent.checkpoint import load_checkpoint, write_planner_settings
 from controller.planning.latent.errors import LatentError
-from controller.training.data import ImageSet, load_images, load_index
+from controller.training.data import load_index
+from perception.detector import Detector
 
 log = logging.getLogger(__name__)
-
-DEFAULT_MAX_FALSE_ABSENT = 0.02
-"""The share of validation present pairs the chosen threshold may call absent. The goal on held-out
-scenes is at most 3 %; 2 % on validation leaves about one binomial standard deviation of ~400 pairs."""
+RULE = (
+    "fewest wrong calls of the loop's decision (the detector's match, then p(kind in view) by kind): "
+    "present called absent + absent called present, as shares"
+)
 
 
 class CalibrationError(LatentError):
@@ -48,15 +51,30 @@ class CalibrationError(LatentError):
 
 
 @dataclass(frozen=True)
-class PresenceCalibration:
-    """The chosen threshold and how: the validation folders, the budget, the rates there."""
+class LoopPresence:
+    """The loop's "not in view" on validation pairs at one threshold (rates the threshold was chosen
+    for, not held-out figures)."""
 
     threshold: float
-    max_false_absent: float
+    n_present: int
+    n_absent: int
+    present_unmatched: int
+    """Present pairs the detector matched nothing for: called absent whatever the threshold."""
+    absent_matched: int
+    """Absent pairs the detector matched something for: the only ones the threshold can turn away."""
+    false_absent_rate: float
+    false_present_rate: float
+
+
+@dataclass(frozen=True)
+class PresenceCalibration:
+    """The chosen threshold and how: the validation folders, the detector, the rates there."""
+
+    threshold: float
     mirror: bool
     validation: tuple[str, ...]
-    result: PresenceResult
-    """The validation pairs judged at `threshold` (the rates it was chosen for, not a held-out figure)."""
+    detector: str
+    result: LoopPresence
 
     def record(self) -> dict[str, Any]:
         """What config.json keeps beside the threshold (`PlannerSettings.presence_calibration`)."""
@@ -64,60 +82,64 @@ class PresenceCalibration:
             "command": "dronectl calibrate-presence",
             "date": datetime.date.today().isoformat(),
             "validation": list(self.validation),
-            "max_false_absent": self.max_false_absent,
-            "asked": "by kind, in the planner's words (grounding.presence_query)",
+            "rule": RULE,
+            "detector": self.detector,
+            "asked": "by kind, in the planner's words (grounding.presence_query), where the detector matched",
             "mirror": self.mirror,
             "validation_result": asdict(self.result),
         }
 
 
-def validation_pairs(ckpt: LoadedCheckpoint, data_dir: Path, mirror: bool) -> tuple[np.ndarray, np.ndarray]:
-    """p(in view) of one folder's present and absent pairs, asked as the loop asks (see the module
-    docstring); `CalibrationError` when the folder has scenes the checkpoint trained on."""
+def _refuse_trained_scenes(trained: set[int], data_dir: Path) -> None:
     index = load_index(data_dir)
-    trained = set(ckpt.meta.get("dataset", {}).get("meta", {}).get("train_scene_seeds") or [])
-    test, empty_rows = index.split("test"), index.split("empty")
-    seen = {r.scene_seed for r in (*test, *empty_rows)} & trained
+    seen = {r.scene_seed for r in (*index.split("test"), *index.split("empty"))} & trained
     if seen:
         raise CalibrationError(
             f"{data_dir}: {len(seen)} of its test scenes trained the checkpoint: calibrate on scenes it "
             f"never saw (`dronectl collect` with a seed no training folder used)"
         )
-    eps = index.default_epsilon_px()
-    size = ckpt.config.image_size
-    data = load_images(test, size, eps, desc=f"{data_dir} test")
-    if not data.targets or len(data) == 0:
-        raise CalibrationError(f"{data_dir}: its test split lists no targets to ask for")
-    empty: ImageSet | None = None
-    if empty_rows:
-        empty = load_images(empty_rows, size, eps, f"{data_dir} empty", in_view_only=False)
-    return kind_presence_pairs(ckpt, data, empty, mirror)
 
 
 def calibrate_presence(
-    model_dir: Path,
-    data_dirs: Sequence[Path],
-    max_false_absent: float = DEFAULT_MAX_FALSE_ABSENT,
-    mirror: bool | None = None,
+    model_dir: Path, data_dirs: Sequence[Path], detector: Detector, detector_name: str
 ) -> PresenceCalibration:
-    """Choose the presence threshold of `model_dir` on the validation folders `data_dirs` (pooled).
-    `mirror` None: as the checkpoint's planner runs (`planner.mirror_tta`)."""
+    """Choose the presence threshold of `model_dir` on the validation folders `data_dirs` (pooled), read
+    as the loop reads them with `detector` (`detector_name` says which, for the record)."""
     ckpt = load_checkpoint(model_dir)
     if ckpt.model.presence is None:
         raise CalibrationError(f"{model_dir}: the checkpoint has no presence head to calibrate")
-    if not 0.0 <= max_false_absent < 1.0:
-        raise CalibrationError(f"the false-absent budget must be in [0, 1), got {max_false_absent:g}")
-    mirror = ckpt.planner.mirror_tta if mirror is None else mirror
-    present, absent = [], []
+    trained = set(ckpt.meta.get("dataset", {}).get("meta", {}).get("train_scene_seeds") or [])
     for folder in data_dirs:
-        p, a = validation_pairs(ckpt, Path(folder), mirror)
-        present.append(p)
-        absent.append(a)
-    p_present, p_absent = np.concatenate(present), np.concatenate(absent)
-    threshold = choose_threshold(p_present, p_absent, max_false_absent)
-    result = judge_presence(p_present, p_absent, threshold)
-    log.info("threshold %.4f on %d present, %d absent pairs", threshold, len(p_present), len(p_absent))
-    return PresenceCalibration(threshold, max_false_absent, mirror, tuple(str(d) for d in data_dirs), result)
+        _refuse_trained_scenes(trained, Path(folder))
+    present: list[float | None] = []
+    absent: list[float | None] = []
+    for folder in data_dirs:
+        try:
+            result = evaluate_with_detector(model_dir, Path(folder), detector)
+        except ValueError as exc:  # a folder without an image whose named target is in view
+            raise CalibrationError(str(exc)) from None
+        present += result.present_presence
+        absent += result.absent_presence
+    if not absent:
+        raise CalibrationError(
+            f"{', '.join(map(str, data_dirs))}: no image lacks a kind to ask for (absent pairs); add a "
+            "folder of 1-4-target scenes"
+        )
+    threshold = fewest_errors_threshold(present, absent)
+    false_absent, false_present = loop_rates(present, absent, threshold)
+    judged = LoopPresence(
+        threshold=threshold,
+        n_present=len(present),
+        n_absent=len(absent),
+        present_unmatched=sum(p is None for p in present),
+        absent_matched=sum(p is not None for p in absent),
+        false_absent_rate=false_absent,
+        false_present_rate=false_present,
+    )
+    log.info("threshold %.4f on %d present, %d absent pairs", threshold, len(present), len(absent))
+    return PresenceCalibration(
+        threshold, ckpt.planner.mirror_tta, tuple(str(d) for d in data_dirs), detector_name, judged
+    )
 
 
 def write_presence_threshold(model_dir: Path, calibration: PresenceCalibration) -> None:

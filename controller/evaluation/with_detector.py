@@ -23,13 +23,16 @@ detector's colour reading chose the wrong twin); and rank-1 over the images wher
 "Not in view" as the loop decides it on one read: a target is taken only when a detection matches the
 query and the planner's presence head, asked by kind on the picture it would see, does not say the kind
 is out of view. Counted for each named target (called absent: missed) and for each kind no target in
-view has (called present: the loop would fly towards something).
+view has (called present: the loop would fly towards something). The result keeps each of these pairs'
+p(in view) as the loop asks it (None where no detection matches: absent whatever the threshold), so the
+same pairs on validation scenes choose the threshold (`presence_calibration`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -66,9 +69,31 @@ class WithDetectorResult:
     absent_called_present: float | None = None
     """The same decision asked for each kind no target in view has: the share it would call present."""
     absent_pairs: int = 0
+    present_presence: tuple[float | None, ...] = field(default=(), repr=False)
+    """Each named target's p(in view) as the loop asks it; None where no detection matches."""
+    absent_presence: tuple[float | None, ...] = field(default=(), repr=False)
+    """The same for each kind no target in view has (the pairs of `absent_called_present`)."""
 
     def as_dict(self) -> dict[str, float | int | None]:
-        return asdict(self)
+        """The figures (the per-pair p's left out)."""
+        body = asdict(self)
+        del body["present_presence"], body["absent_presence"]
+        return body
+
+
+def called_absent(p: float | None, threshold: float) -> bool:
+    """The loop's verdict on one read of a pair: absent where no detection matches (`p` None) or the
+    planner's p(in view) lies below `threshold`."""
+    return p is None or p < threshold
+
+
+def loop_rates(
+    present: Sequence[float | None], absent: Sequence[float | None], threshold: float
+) -> tuple[float, float]:
+    """(present pairs called absent, absent pairs called present), as shares, at `threshold`."""
+    missed = sum(called_absent(p, threshold) for p in present)
+    taken = sum(not called_absent(p, threshold) for p in absent)
+    return missed / max(1, len(present)), taken / max(1, len(absent))
 
 
 def loop_query(row: Row) -> TargetQuery:
@@ -103,32 +128,35 @@ def evaluate_with_detector(
     rows = [r for r in index.split(split) if r.in_view and r.targets]
     if not rows:
         raise ValueError(f"{data_dir}: no {split} image whose named target is in view")
-    hits = not_found = wrong = twins = twin_hits = present_missed = absent_pairs = absent_taken = 0
+    hits = not_found = wrong = twins = twin_hits = 0
+    present: list[float | None] = []
+    absent: list[float | None] = []
     kinds = sorted({t.kind for r in rows for t in r.targets})
     for row in rows:
-        image = read_image_rgb(row.image if row.image.is_absolute() else index.root / row.image)
+        image = read_image_rgb(row.image)  # the folder's path joined already, relative or not
         height, width = image.shape[:2]
         query = loop_query(row)
         detections = detect_all(detector, image)
         for kind in kinds:  # asked for a kind not in view: what the loop would take for it
             if not any(t.in_view and t.kind == kind for t in row.targets):
-                absent_pairs += 1
-                absent_taken += _found(planner, image, detections, TargetQuery(kind), eps)
+                absent.append(_presence(planner, image, detections, TargetQuery(kind), eps))
         chosen = select_target(detections, query)
         named_twins = query.attribute is not None
         twins += named_twins
         if chosen is None:
             not_found += 1
-            present_missed += 1
+            present.append(None)
             continue
         wrong += _took_another(chosen, row, width, height)
         picture = paint_over_twins(image, chosen, detections)
         words = planner_instruction(query)
         plan = planner.plan(Observation(picture, chosen, words, eps, None, detections))
-        present_missed += not _in_view(planner, picture, chosen, detections, query, eps, (words, plan))
+        present.append(_asked_presence(planner, picture, chosen, detections, query, eps, (words, plan)))
         hit = plan.action.index == label_from_offset(row.offset_px[0], row.offset_px[1], eps).index
         hits += hit
         twin_hits += hit and named_twins
+    threshold = planner.presence_threshold
+    rates = None if threshold is None else loop_rates(present, absent, threshold)
     return WithDetectorResult(
         n=len(rows),
         rank1=hits / len(rows),
@@ -137,31 +165,31 @@ def evaluate_with_detector(
         twins=twins,
         twins_rank1=twin_hits / twins if twins else None,
         matched_rank1=hits / (len(rows) - not_found) if len(rows) > not_found else None,
-        present_called_absent=present_missed / len(rows) if planner.judges_presence else None,
-        absent_called_present=absent_taken / absent_pairs
-        if planner.judges_presence and absent_pairs
-        else None,
-        absent_pairs=absent_pairs,
+        present_called_absent=None if rates is None else rates[0],
+        absent_called_present=None if rates is None or not absent else rates[1],
+        absent_pairs=len(absent),
+        present_presence=tuple(present),
+        absent_presence=tuple(absent),
     )
 
 
-def _found(
+def _presence(
     planner: LatentPlannerAdapter,
     image: np.ndarray,
     detections: tuple[Detection, ...],
     query: TargetQuery,
     eps: float,
-) -> bool:
-    """Whether the loop takes a detection for `query`'s target on this read: one matches it, and the
-    planner does not say its kind is out of view (`_in_view`)."""
+) -> float | None:
+    """p(in view) of `query`'s target as the loop asks it on this read (`_asked_presence`); None where no
+    detection matches it."""
     chosen = select_target(detections, query)
     if chosen is None:
-        return False
+        return None
     picture = paint_over_twins(image, chosen, detections)
-    return _in_view(planner, picture, chosen, detections, query, eps)
+    return _asked_presence(planner, picture, chosen, detections, query, eps)
 
 
-def _in_view(
+def _asked_presence(
     planner: LatentPlannerAdapter,
     picture: np.ndarray,
     chosen: Detection,
@@ -169,13 +197,13 @@ def _in_view(
     query: TargetQuery,
     eps: float,
     asked: tuple[str, Plan] | None = None,
-) -> bool:
-    """Whether the planner, asked by kind on the picture it sees (`CentringLoop._confirm`), does not say
-    the kind is out of view; `asked`: words the planner was already asked on this picture, and its plan
-    (used again when they are the kind's words)."""
+) -> float | None:
+    """The planner's p(in view), asked by kind on the picture it sees (`CentringLoop._confirm`); None
+    from a planner without a presence head. `asked`: words the planner was already asked on this
+    picture, and its plan (used again when they are the kind's words)."""
     words = planner_instruction(presence_query(query, chosen))
     if asked is not None and asked[0] == words:
         plan = asked[1]
     else:
         plan = planner.plan(Observation(picture, chosen, words, eps, None, detections))
-    return plan.in_view is not False
+    return plan.presence

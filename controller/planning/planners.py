@@ -114,7 +114,12 @@ class LatentPlannerAdapter:
     def judges_presence(self) -> bool:
         """Whether its plans say if the asked-for target is in view (`Plan.in_view`): a presence head and
         a calibrated threshold. The loop asks only a planner that does (`planning.loop`)."""
-        return self._planner.presence_threshold is not None
+        return self.presence_threshold is not None
+
+    @property
+    def presence_threshold(self) -> float | None:
+        """p(in view) below which its plans say the asked-for target is not in view; None: no verdict."""
+        return self._planner.presence_threshold
 
     def plan(self, observation: Observation) -> Plan:
         actions, distances, presence = self._planner.plan_with_presence(
