@@ -96,6 +96,33 @@ def test_read_attribute_on_synthetic_trim() -> None:
     assert read_attribute(np.zeros((8, 8, 3), np.uint8), (3.0, 3.0, 3.5, 3.5), "gauge") is None
 
 
+def test_a_small_gauges_saturated_bezel_is_not_outvoted_by_its_dial() -> None:
+    """A gauge 17 px across with a 1 px bezel, its white dial and black ticks filling most of the band, on
+    a blue-grey wall (as the twins set's misread blue gauges): the dial's pixels are best explained by
+    grey, and their median read the blue bezel grey. A saturated colour that closely explains enough of
+    the band wins; a grey or black bezel is never read as a saturated colour."""
+    import cv2
+
+    def small_gauge(rgb: tuple[int, int, int], seed: int) -> np.ndarray:
+        rng = np.random.default_rng(seed)
+        wall = np.array((81, 99, 115), np.float32) + rng.normal(0, 4, (48, 48, 3))
+        image = np.clip(wall, 0, 255).astype(np.uint8)
+        cv2.circle(image, (24, 24), 8, tuple(int(v) for v in rgb), -1, cv2.LINE_AA)
+        cv2.circle(image, (24, 24), 7, (214, 207, 200), -1, cv2.LINE_AA)
+        for angle in np.linspace(0, 2 * np.pi, 12, endpoint=False):
+            image[int(24 + 6 * np.sin(angle)), int(24 + 6 * np.cos(angle))] = (20, 20, 20)
+        return image
+
+    for colour in shipped_vocabulary().colours.values():
+        reads = {
+            read_attribute(small_gauge(colour.rgb, s), (15.0, 15.0, 33.5, 33.5), "gauge") for s in range(5)
+        }
+        if colour.name in ("red", "blue", "yellow"):
+            assert reads == {colour.name}, (colour.name, reads)
+        else:
+            assert reads <= {"black", "grey"}, (colour.name, reads)
+
+
 def test_a_switch_box_read_around_a_misplaced_box_is_snapped_to_its_door_first(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -157,5 +184,6 @@ def test_a_target_cut_by_the_frame_edge_has_its_colour_read_around_its_whole_box
         assert found  # seen: its centre is in the frame
         right += found[0].attribute == colour
         right_if_clipped += read_attribute(image, found[0].bbox_px, kind) == colour
-    # Measured 14 of 16 around the whole box, 4 of 16 around the clipped one (its rim on the target's face).
-    assert right >= len(renders) - 3 and right > right_if_clipped + 5, (right, right_if_clipped)
+    # Measured 16 of 16 around the whole box, 12 of 16 around the clipped one (its rim on the target's face;
+    # 14 and 4 before a gauge's saturated bezel outvoted its dial: `attributes._saturated_bezel`).
+    assert right >= len(renders) - 2 and right > right_if_clipped + 2, (right, right_if_clipped)
