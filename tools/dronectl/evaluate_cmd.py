@@ -179,8 +179,8 @@ def _print_result(result: EvalResult, detailed: bool) -> None:
         print("rank-1 by targets in view: " + ", ".join(parts))
     for what, pr in (
         ("in these words", result.presence),
-        ("by kind, as the loop asks", result.presence_by_kind),
-    ):
+        ("by kind, the head alone: every pair as if the detector had matched it", result.presence_by_kind),
+    ):  # as the loop decides, the detector included: --with-detector's last line
         if pr is None:
             continue
         print(
