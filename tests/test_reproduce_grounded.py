@@ -100,6 +100,7 @@ def test_grounded_reproduction_trains_each_seed_once_and_reports(tmp_path: Path)
         train_overrides={"shift_init_std": 0.25},
     )  # fmt: skip
     text = report.read_text()
+    assert "with `--preset grounded` (shift_init_std = 0.25);" in text  # the recipe under test named
     assert "| one (" in text and "| two (" in text and f"| {LOOK} (" in text and text.count("gap:") == 4
     assert "## With its mirror image" in text  # every test set also scored as the planner can run
     data = json.loads((out / "grounded.json").read_text())

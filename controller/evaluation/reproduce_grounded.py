@@ -240,10 +240,12 @@ def render_report(
     tests: Sequence[tuple[str, Path]],
 ) -> str:
     seeds = ", ".join(str(s) for s in table["seeds"])
+    changed = sorted({f"{k} = {v}" for r in results for k, v in (r.get("train_overrides") or {}).items()})
+    recipe = "`--preset grounded`" + (f" ({', '.join(changed)})" if changed else "")
     lines = [
         "# The instruction chooses the target: the grounded preset over seeds",
         "",
-        f"Trained on {', '.join(str(d) for d in train_dirs)} with `--preset grounded`; seeds {seeds}. "
+        f"Trained on {', '.join(str(d) for d in train_dirs)} with {recipe}; seeds {seeds}. "
         "Held-out phrasings and synonyms on every test set. Mean ± sd over seeds (min–max).",
     ]
     titles = {"tests": "Each image alone", "tests_mirror": "With its mirror image (`--mirror-tta`)"}

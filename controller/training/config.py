@@ -175,7 +175,7 @@ class TrainConfig:
     # The spread of the global action shifts g_X, g_Z when training starts from scratch. At a small
     # one the nine predicted states start almost equally far from the goal and the ranking loss sits
     # at ln 9 until the shifts drift apart, longer for some seeds than others. 0.5 ends it sooner, but
-    # trained two of two seeds of the grounded recipe worse on unseen scenes (docs/targets.md).
+    # its three seeds of the grounded recipe did worse on the held-out look (docs/targets.md).
     shift_init_std: float = SHIFT_INIT_STD
 
     def __post_init__(self) -> None:
