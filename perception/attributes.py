@@ -37,7 +37,8 @@ targets at the shipped threshold, against 91.20 % before.
 
 A gauge's band also holds the rim of its white dial and the dial's black ticks, which grey and black
 explain. On a small or tilted gauge those are most of the candidates, and their median read a blue
-or red bezel grey (10 of the 12 colour misreads of the named targets on `data/twins`' test images).
+or red bezel grey (10 of the 12 colour misreads of the named targets on `data/twins`' test images,
+looked at with a throwaway script).
 So where the median names an unsaturated colour for a gauge, a saturated one (red, blue, yellow)
 wins if it is the close best explanation of at least 15 % of the candidates (`_saturated_bezel`;
 the values were the first tried, on the validation folders). The shipped detector's boxes on
@@ -128,8 +129,8 @@ def _saturated_bezel(residual: np.ndarray) -> int | None:
     holds its dial's white face and black ticks, which the unsaturated colours explain: on a small or
     tilted gauge they are most of the candidates, and their median read a blue bezel grey."""
     best = residual.argmin(axis=0)
-    hits = np.array([np.sum((best == c) & (residual[c] < _HIT_RESIDUAL)) for c in range(len(_NAMES))])
-    hits = np.where(_SATURATED, hits, 0)
+    close = residual[best, np.arange(residual.shape[1])] < _HIT_RESIDUAL
+    hits = np.where(_SATURATED, np.bincount(best[close], minlength=len(_NAMES)), 0)
     colour = int(np.argmax(hits))
     return colour if hits[colour] >= max(3, _HIT_SHARE * residual.shape[1]) else None
 

@@ -211,14 +211,10 @@ def fewest_errors_threshold(present: Sequence[float | None], absent: Sequence[fl
     taken = (a[None, :] >= highs[:, None]).sum(axis=1)
     error = missed / len(present) + taken / len(absent)
     best = np.isclose(error, error.min(), rtol=0.0, atol=1e-12)
-    start = width = best_start = best_end = 0.0
-    for low, high, ok in zip(lows, highs, best, strict=True):  # the widest run of best intervals
-        if not ok:
-            width = 0.0
-            continue
-        if width == 0.0:
-            start = low
-        width = high - start
-        if width > best_end - best_start:
-            best_start, best_end = start, high
-    return float((best_start + best_end) / 2.0)
+    run_start: float | None = None  # where the run of best intervals under way began
+    widest = (0.0, 0.0)
+    for low, high, ok in zip(lows, highs, best, strict=True):
+        run_start = (low if run_start is None else run_start) if ok else None
+        if run_start is not None and high - run_start > widest[1] - widest[0]:
+            widest = (run_start, high)
+    return float(sum(widest) / 2.0)
