@@ -24,6 +24,7 @@ import http.client
 import io
 import logging
 import socket
+import threading
 import time
 from urllib.parse import urlsplit
 
@@ -156,7 +157,42 @@ def jpeg_size(data: bytes) -> tuple[int, int] | None:
     return None
 
 
-class MjpegHttpCapture:
+TOO_LARGE = np.empty(0, np.uint8)
+"""`decode_jpeg`'s answer for a JPEG whose header announces more than `MAX_PIXELS` (not decoded)."""
+
+
+def decode_jpeg(data: bytes) -> np.ndarray | None:
+    """A JPEG as BGR through OpenCV; None where it is none, `TOO_LARGE` (undecoded) where its header
+    announces more than `MAX_PIXELS` (a few bytes can announce gigabytes of pixels)."""
+    size = jpeg_size(data)
+    if size is not None and not 0 < size[0] * size[1] <= MAX_PIXELS:
+        return TOO_LARGE
+    if size is None:
+        return None
+    try:
+        return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    except cv2.error:  # OpenCV refuses some broken pictures by raising
+        return None
+
+
+class _JpegCounts:
+    """What both captures count of the pictures they could not use."""
+
+    skipped: int
+    oversized: int
+
+    def _decode(self, body: bytes) -> np.ndarray | None:
+        """A JPEG as BGR, or None (counted in `skipped`) where it is no picture or announces too many
+        pixels (counted in `oversized` too)."""
+        bgr = decode_jpeg(body)
+        self.oversized += bgr is TOO_LARGE
+        if bgr is None or bgr is TOO_LARGE:
+            self.skipped += 1
+            return None
+        return bgr
+
+
+class MjpegHttpCapture(_JpegCounts):
     """`cv2.VideoCapture`'s reading interface on an `http://` MJPEG URL, keeping each part's scene stamp."""
 
     def __init__(self, url: str, open_timeout_s: float, read_timeout_s: float) -> None:
@@ -215,15 +251,8 @@ class MjpegHttpCapture:
                 self.error = str(exc) or type(exc).__name__
                 log.debug("MJPEG %s: %s", self.url, self.error)
                 return False, None
-            size = jpeg_size(body)
-            fits = size is not None and 0 < size[0] * size[1] <= MAX_PIXELS
-            self.oversized += size is not None and not fits
-            try:
-                bgr = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_COLOR) if fits else None
-            except cv2.error:  # OpenCV refuses some broken pictures by raising
-                bgr = None
+            bgr = self._decode(body)
             if bgr is None:
-                self.skipped += 1
                 bad += 1
                 if bad >= MAX_BAD_PARTS:
                     self.error = f"{bad} parts in a row are no picture OpenCV can decode"
@@ -243,3 +272,93 @@ class MjpegHttpCapture:
                 with contextlib.suppress(OSError):  # not connected any more
                     sock.shutdown(socket.SHUT_RDWR)
             conn.close()
+
+
+class MjpegPullCapture(_JpegCounts):
+    """The same interface on a simulator's MJPEG server read picture by picture: each `read()` asks
+    `/frame.jpg?fresh=1` for a frame published after the request came (the render process then draws it:
+    it draws nothing nobody asked for) and keeps its scene stamp. `url` names the server (its stream URL
+    does). A response that is not one bounded JPEG (`MAX_PART_BYTES`, `MAX_PIXELS`) is no frame;
+    `MAX_BAD_PARTS` of them in a row end the reading (the camera's reconnect takes over)."""
+
+    def __init__(self, url: str, open_timeout_s: float, read_timeout_s: float) -> None:
+        self.url = url
+        self.scene_s: float | None = None
+        self.skipped = 0
+        self.oversized = 0
+        self.error: str | None = None
+        self._read_timeout_s = read_timeout_s
+        self._conn: http.client.HTTPConnection | None = None
+        self._open = False
+        parts = urlsplit(url)
+        if parts.scheme != "http" or not parts.hostname:
+            self.error = f"not an http:// URL: {url!r}"
+            return
+        self._server = (parts.hostname, parts.port or 80)
+        self._open = True
+        self._open = self._pull(open_timeout_s)[0]  # a picture proves it open; the reads ask for their own
+
+    def isOpened(self) -> bool:  # cv2.VideoCapture's name
+        return self._open
+
+    def get(self, prop: int) -> float:
+        return 0.0
+
+    def read(self) -> tuple[bool, np.ndarray | None]:
+        """A picture drawn after this call (`scene_s` its stamp); (False, None) once the server fails,
+        answers nothing within the read timeout or the capture is released."""
+        return self._pull(self._read_timeout_s)
+
+    def _pull(self, timeout_s: float) -> tuple[bool, np.ndarray | None]:
+        for _ in range(MAX_BAD_PARTS):
+            if not self._open:
+                return False, None
+            try:
+                headers, body = self._get(timeout_s)
+            except (OSError, ValueError, http.client.HTTPException, MjpegStreamError) as exc:
+                self.error = str(exc) or type(exc).__name__
+                log.debug("MJPEG %s: %s", self.url, self.error)
+                return False, None
+            bgr = self._decode(body)
+            if bgr is not None:
+                self.scene_s = parse_scene_stamp(headers.get(SCENE_STAMP_HEADER.lower()))
+                return True, bgr
+        self.error = f"{MAX_BAD_PARTS} answers in a row are no picture OpenCV can decode"
+        return False, None
+
+    def _get(self, timeout_s: float) -> tuple[dict[str, str], bytes]:
+        """One picture's headers and bytes, all within `timeout_s` (a trickle is cut off at its end)."""
+        conn = http.client.HTTPConnection(*self._server, timeout=timeout_s)
+        self._conn = conn
+        cut_off = threading.Timer(timeout_s, self._shut, args=(conn,))
+        cut_off.daemon = True
+        try:
+            conn.connect()
+            cut_off.start()
+            conn.request("GET", "/frame.jpg?fresh=1", headers={"Accept": "image/jpeg"})
+            response = conn.getresponse()
+            if response.status != 200:
+                raise MjpegStreamError(f"HTTP {response.status} {response.reason}")
+            length = response.getheader("Content-Length")
+            if length is not None and not (length.isdigit() and 0 < int(length) <= MAX_PART_BYTES):
+                raise MjpegStreamError(f"a picture of {length!r} bytes (at most {MAX_PART_BYTES})")
+            body = response.read(MAX_PART_BYTES + 1)
+            if len(body) > MAX_PART_BYTES:
+                raise MjpegStreamError(f"a picture of over {MAX_PART_BYTES} bytes")
+            return {k.lower(): v for k, v in response.getheaders()}, body
+        finally:
+            cut_off.cancel()
+            conn.close()
+
+    @staticmethod
+    def _shut(conn: http.client.HTTPConnection) -> None:
+        sock = conn.sock
+        if sock is not None:
+            with contextlib.suppress(OSError):  # not connected any more
+                sock.shutdown(socket.SHUT_RDWR)
+
+    def release(self) -> None:
+        """No more reads (one blocked in another thread returns False)."""
+        self._open = False
+        if self._conn is not None:
+            self._shut(self._conn)

@@ -18,7 +18,8 @@ saying so. A video file ends with `CameraStreamEndedError`.
 A simulator's own stream, read with `scene_stamps=True`, is read part by part
 (`perception.mjpeg_http`, each JPEG still decoded by OpenCV) so that each frame
 keeps the scene stamp its render process sent (`Frame.scene_s`); FFmpeg's reader
-drops it.
+drops it. With `on_demand=True` as well, the simulator is asked for one picture per
+`read()` (`MjpegPullCapture`): its render process draws only the pictures read.
 
 Every wait is bounded: opening (OpenCV's CAP_PROP_OPEN_TIMEOUT_MSEC plus a join
 timeout, since some backends ignore it), each decode (CAP_PROP_READ_TIMEOUT_MSEC),
@@ -37,13 +38,14 @@ import cv2
 
 from perception.camera import Camera
 from perception.errors import CameraOpenError, CameraStreamEndedError
-from perception.mjpeg_http import MjpegHttpCapture
+from perception.mjpeg_http import MjpegHttpCapture, MjpegPullCapture
 from perception.newest_frame import NewestFrame
 from perception.types import Frame
 
 log = logging.getLogger(__name__)
 
 _RECONNECT_BACKOFF_S = 0.5
+_WANTED_POLL_S = 0.2  # on demand, how often the idle reader looks at the stop flag
 _OPEN_HINT = (
     "OpenCV could not open it (refused connection, unreachable host, wrong path, no such device "
     "or unsupported format); check it with `ffprobe <source>`"
@@ -66,6 +68,8 @@ class StreamCamera(Camera):
     `reconnect`: reopen a live source after it drops (False: `CameraStreamEndedError`).
     `scene_stamps`: the source is an http:// MJPEG stream of a simulator on this host; its parts'
     scene stamps are this host's clock and become `Frame.scene_s` (see `drone_inspect_core.video_stamps`).
+    `on_demand` (with `scene_stamps`): no reading between `read()`s; each asks the simulator for a picture
+    drawn after it began, so nothing is drawn, sent or decoded that no one reads.
     `source_alive`: whether the process serving the stream still runs (a simulator the caller started);
     a stream that drops once it has exited ends at once (`CameraStreamEndedError`) instead of `read()`
     waiting out its timeout for a reconnect that cannot come.
@@ -80,6 +84,7 @@ class StreamCamera(Camera):
         reconnect: bool = True,
         scene_stamps: bool = False,
         source_alive: Callable[[], bool] | None = None,
+        on_demand: bool = False,
     ) -> None:
         if timeout_s <= 0 or open_timeout_s <= 0:
             raise ValueError(
@@ -93,7 +98,11 @@ class StreamCamera(Camera):
         self._is_file = isinstance(source, str) and "://" not in source
         if scene_stamps and not (isinstance(source, str) and source.startswith("http://")):
             raise ValueError(f"scene stamps come only with an http:// MJPEG stream, not {self.name}")
+        if on_demand and not scene_stamps:
+            raise ValueError("pictures on demand come only from a simulator's stream read with scene stamps")
         self._scene_stamps = scene_stamps
+        self._on_demand = on_demand
+        self._wanted = threading.Event()  # on demand: a read() waits for a picture
         self._source_alive = source_alive
         self._open_error: str | None = None
         if self._is_file and not Path(str(source)).is_file():
@@ -123,7 +132,9 @@ class StreamCamera(Camera):
     def _source_gone(self) -> bool:
         return self._source_alive is not None and not self._source_alive()
 
-    def _capture(self) -> cv2.VideoCapture | MjpegHttpCapture:
+    def _capture(self) -> cv2.VideoCapture | MjpegHttpCapture | MjpegPullCapture:
+        if self._on_demand:
+            return MjpegPullCapture(str(self.source), self._open_timeout_s, self.timeout_s)
         if self._scene_stamps:
             return MjpegHttpCapture(str(self.source), self._open_timeout_s, self.timeout_s)
         if isinstance(self.source, int):
@@ -146,7 +157,7 @@ class StreamCamera(Camera):
                     if not cap.isOpened():
                         if not self._opened.is_set():  # the first open: the constructor reports it
                             self._open_failed = True
-                            if isinstance(cap, MjpegHttpCapture):
+                            if isinstance(cap, (MjpegHttpCapture, MjpegPullCapture)):
                                 self._open_error = f"{cap.error}; is the simulator's stream up?"
                             return
                         if self._source_gone():
@@ -183,16 +194,21 @@ class StreamCamera(Camera):
         finally:
             self._opened.set()
 
-    def _decode(self, cap: cv2.VideoCapture | MjpegHttpCapture, number: int) -> int:
-        """Decode frames until the source fails or `close()`; returns the next frame number."""
+    def _decode(self, cap: cv2.VideoCapture | MjpegHttpCapture | MjpegPullCapture, number: int) -> int:
+        """Decode frames until the source fails or `close()` (on demand: one per `read()` waiting for one);
+        returns the next frame number."""
         fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0)
         period_s = 1.0 / fps if self._pace and 0.0 < fps < 1000.0 else 0.0
         start, first = time.monotonic(), number
         while not self._stop.is_set():
+            if self._on_demand:
+                if not self._wanted.wait(_WANTED_POLL_S) or self._stop.is_set():
+                    continue
+                self._wanted.clear()
             ok, bgr = cap.read()
             if not ok or bgr is None:
                 break
-            scene_s = cap.scene_s if isinstance(cap, MjpegHttpCapture) else None
+            scene_s = cap.scene_s if isinstance(cap, (MjpegHttpCapture, MjpegPullCapture)) else None
             frame = Frame(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), time.monotonic(), number, scene_s)
             number += 1
             with self._cond:
@@ -205,6 +221,8 @@ class StreamCamera(Camera):
     def read(self, timeout_s: float | None = None) -> Frame:
         """The newest frame received since the last `read()`; waits up to `timeout_s`."""
         timeout = self.timeout_s if timeout_s is None else timeout_s
+        if self._on_demand:
+            self._wanted.set()
         with self._cond:
             frame = self._frames.take(timeout, lambda: self._dropped or "stream stalled or frozen")
             self.frames_returned += 1
@@ -215,6 +233,7 @@ class StreamCamera(Camera):
         if not self._frames.close():
             return
         self._stop.set()
+        self._wanted.set()  # an idle reader on demand wakes at once
         self._thread.join(timeout_s)
         if self._thread.is_alive():  # normal on a live stream with no new frame: it exits on its own
             log.debug("camera %s: reader still blocked in a decode; it exits when that returns", self.name)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import socket
+import threading
+import time
 import urllib.error
 import urllib.request
 
@@ -11,6 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
+from drone_inspect_core.video_stamps import SCENE_STAMP_HEADER
 from sim_world.rendering.mjpeg import BOUNDARY, MjpegServer
 
 PORT = 18000
@@ -137,3 +140,50 @@ def test_two_hundred_viewers_connecting_at_once_all_get_frames() -> None:
         for thread in threads:
             thread.join(timeout=20.0)
         assert sum(got) == n
+
+
+def _get_in_thread(url: str) -> tuple[threading.Thread, list]:
+    answer: list = []
+    thread = threading.Thread(target=lambda: answer.append(_get(url)))
+    thread.start()
+    return thread, answer
+
+
+def test_on_demand_a_picture_or_a_truth_waits_for_the_publisher_s_answer() -> None:
+    with MjpegServer(port=0, on_demand=True) as server:
+        base = f"http://127.0.0.1:{server.port}"
+        server.publish(_image(10), {"at": 0}, scene_s=1.0)
+        assert server.asked() == (0, False) and not server.wait_asked(0.05)
+        thread, answer = _get_in_thread(base + "/frame.jpg")  # on demand: a picture drawn for it
+        assert server.wait_asked(2.0)
+        number, new_frame = server.asked()
+        assert number == 1 and new_frame and not answer  # nothing is sent before the answer
+        server.answer(number)  # the truth of an unchanged scene answers no picture demand ...
+        server.publish(_image(200), {"at": 1}, scene_s=2.0, answers=number)  # ... a new frame does
+        thread.join(3.0)
+        status, headers, _ = answer[0]
+        assert status == 200 and headers["X-Frame-Number"] == "1"
+        assert float(headers[SCENE_STAMP_HEADER]) == 2.0
+        assert server.asked() == (0, False)
+
+        thread, answer = _get_in_thread(base + "/truth.json")  # the truth of now: the scene stood still
+        assert server.wait_asked(2.0) and server.asked() == (2, False)
+        server.answer(2)
+        thread.join(3.0)
+        assert json.loads(answer[0][2]) == {"frame_number": 1, "truth": {"at": 1}}
+        assert _get(base + "/truth.json?frame=0")[0] == 200  # a frame by number: no demand
+        assert server.asked() == (0, False)
+
+
+def test_without_demands_fresh_is_the_next_frame_published_and_truth_does_not_wait() -> None:
+    with MjpegServer(port=0) as server:
+        base = f"http://127.0.0.1:{server.port}"
+        server.publish(_image(10), {"at": 0})
+        assert _get(base + "/truth.json")[0] == 200 and server.asked() == (0, False)
+        thread, answer = _get_in_thread(base + "/frame.jpg?fresh=1")
+        time.sleep(0.2)
+        assert not answer  # the latest frame (0) came before the request
+        server.publish(_image(200), {"at": 1})
+        thread.join(3.0)
+        assert answer[0][1]["X-Frame-Number"] == "1"
+        assert _get(base + "/frame.jpg")[1]["X-Frame-Number"] == "1"  # plain: the latest, at once

@@ -25,6 +25,7 @@ from perception.mjpeg_http import (
     MAX_PART_BYTES,
     MjpegHttpCapture,
     MjpegParts,
+    MjpegPullCapture,
     MjpegStreamError,
     boundary_of,
     jpeg_size,
@@ -286,3 +287,84 @@ def test_a_fresh_frame_is_chosen_by_its_stamp_when_it_has_one_else_by_arrival_an
     started = time.monotonic()
     assert read_fresh(old, time.monotonic(), margin_s=0.0, timeout_s=0.2).frame_number == 2
     assert time.monotonic() - started < 1.0
+
+
+def _answering_server(
+    answers: list[bytes], pause_s: float = 0.0
+) -> tuple[str, threading.Thread, socket.socket]:
+    """A server (a raw socket, named so) that answers each of len(answers) GETs, one connection each, with
+    the next raw answer (sent a byte every `pause_s` when given)."""
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(4)
+
+    def serve() -> None:
+        for answer in answers:
+            try:
+                conn, _ = listener.accept()
+            except OSError:
+                return
+            with conn, contextlib.suppress(OSError):
+                conn.recv(4096)
+                if pause_s:
+                    for byte in answer:
+                        conn.sendall(bytes([byte]))
+                        time.sleep(pause_s)
+                else:
+                    conn.sendall(answer)
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    return f"http://127.0.0.1:{listener.getsockname()[1]}/stream.mjpg", thread, listener
+
+
+def _jpeg_answer(body: bytes, stamp: bytes = b"", length: bytes | None = None) -> bytes:
+    head = b"HTTP/1.0 200 OK\r\nContent-Type: image/jpeg\r\nContent-Length: %s\r\n" % (
+        length or b"%d" % len(body)
+    )
+    return head + (b"X-Scene-Monotonic: %s\r\n" % stamp if stamp else b"") + b"\r\n" + body
+
+
+def test_pictures_on_demand_skip_what_does_not_decode_and_refuse_what_is_too_big_or_too_slow() -> None:
+    import cv2
+
+    good = cv2.imencode(".jpg", counter_image(9))[1].tobytes()
+    sof = good.index(b"\xff\xc0")
+    huge = good[: sof + 5] + (20000).to_bytes(2, "big") * 2 + good[sof + 9 :]
+    url, thread, listener = _answering_server(
+        [
+            _jpeg_answer(good, b"1.0"),
+            _jpeg_answer(huge, b"2.0"),
+            _jpeg_answer(b"junk"),
+            _jpeg_answer(good, b"3.0"),
+        ]
+    )
+    try:
+        capture = MjpegPullCapture(url, open_timeout_s=2.0, read_timeout_s=2.0)  # the first answer opens it
+        assert capture.isOpened()
+        ok, bgr = capture.read()  # the huge one and the junk are skipped, each asked again
+        assert ok and read_counter(bgr[:, :, ::-1]) == 9 and capture.scene_s == 3.0
+        assert (capture.oversized, capture.skipped) == (1, 2)
+        capture.release()
+        assert capture.read() == (False, None)
+    finally:
+        thread.join(2.0)
+        listener.close()
+
+    url, thread, listener = _answering_server([_jpeg_answer(good, length=b"%d" % (MAX_PART_BYTES + 1))])
+    try:
+        capture = MjpegPullCapture(url, open_timeout_s=2.0, read_timeout_s=2.0)
+        assert not capture.isOpened() and "at most" in (capture.error or "")
+    finally:
+        listener.close()
+
+    url, thread, listener = _answering_server([_jpeg_answer(good)], pause_s=0.05)  # a byte every 50 ms
+    started = time.monotonic()
+    try:
+        with pytest.raises(CameraOpenError):
+            StreamCamera(
+                url, timeout_s=2.0, open_timeout_s=1.0, scene_stamps=True, on_demand=True, reconnect=False
+            )
+        assert time.monotonic() - started < 3.0
+    finally:
+        listener.close()

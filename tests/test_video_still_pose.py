@@ -23,7 +23,9 @@ class FakeMjpegServer:
         self.frames: list[tuple[np.ndarray, dict[str, Any]]] = []
         self.stamps: list[float | None] = []
 
-    def publish(self, image: np.ndarray, truth: dict[str, Any], scene_s: float | None = None) -> None:
+    def publish(
+        self, image: np.ndarray, truth: dict[str, Any], scene_s: float | None = None, answers: int = 0
+    ) -> None:
         self.frames.append((image.copy(), truth))
         self.stamps.append(scene_s)
 

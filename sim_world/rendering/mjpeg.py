@@ -5,12 +5,21 @@ once, in the caller's thread, and every connected client is woken to send it. A 
 client skips frames and always gets the newest one; nothing is queued, so the
 server adds no latency of its own and never grows a backlog.
 
+Pictures on demand (`on_demand=True`, the simulators' render processes): a reader that wants one
+picture now asks `/frame.jpg`, and a `/truth.json` of the latest frame asks for the truth of
+now; each is a demand the publisher answers (`asked()`, then `publish(..., answers=N)` or
+`answer(N)`) with a scene read after the demand came, so a publisher with no stream client
+connected renders nothing nobody asked for (`wait_asked()`).
+
 Endpoints:
 - `/stream.mjpg`: `multipart/x-mixed-replace` JPEG parts with `Content-Length`
   (what OpenCV/FFmpeg, browsers and VLC read); starts with the latest frame. A part of a
   frame published with a scene stamp carries it (`drone_inspect_core.video_stamps`).
-- `/frame.jpg`: the latest frame, header `X-Frame-Number`.
-- `/truth.json`: the truth published with the latest frame, or with frame N via
+- `/frame.jpg`: the latest frame (on demand: a picture drawn for the request), header
+  `X-Frame-Number` (and the scene stamp, if it has one); `/frame.jpg?fresh=1`: a frame published
+  after the request came (504 if none within the client timeout).
+- `/truth.json`: the truth published with the latest frame (on demand: of a scene read after the
+  request came, waiting up to `TRUTH_WAIT_S`), or with frame N via
   `/truth.json?frame=N` (the last `truth_history` frames). For the test harness
   only: the controller must never read it.
 
@@ -39,6 +48,9 @@ log = logging.getLogger(__name__)
 
 BOUNDARY = "mjpegframe"
 _WAKE_INTERVAL_S = 0.2  # how often idle stream handlers look at the closing flag
+TRUTH_WAIT_S = 1.0
+"""On demand: how long a `/truth.json` of the latest frame waits for the publisher's answer (then the
+latest truth there is, as without demands)."""
 
 
 @dataclass(frozen=True)
@@ -66,6 +78,7 @@ class MjpegServer:
         jpeg_quality: int = 90,
         truth_history: int = 256,
         client_timeout_s: float = 5.0,
+        on_demand: bool = False,
     ) -> None:
         if not 1 <= jpeg_quality <= 100:
             raise ValueError(f"jpeg_quality must be in [1, 100], got {jpeg_quality}")
@@ -78,7 +91,11 @@ class MjpegServer:
         self._truths: OrderedDict[int, Any] = OrderedDict()
         self._next_number = 0
         self._closing = False
-        self._clients: set[threading.Thread] = set()
+        self._clients: set[threading.Thread] = set()  # stream clients' handlers
+        self.on_demand = on_demand
+        self._asked = 0  # demands made, numbered from 1
+        self._frames_asked: list[int] = []  # the numbers of demands for a new frame, not yet all answered
+        self._answered = 0  # every demand up to this number is answered
         try:
             self._httpd = _Httpd((host, port), _Handler, self, client_timeout_s)
         except OSError as exc:
@@ -105,11 +122,20 @@ class MjpegServer:
     def frames_published(self) -> int:
         return self._next_number
 
-    def publish(self, image_rgb: np.ndarray, truth: Any = None, scene_s: float | None = None) -> int:
+    @property
+    def stream_clients(self) -> int:
+        """Stream clients connected now (each is sent every frame it can take)."""
+        with self._cond:
+            return len(self._clients)
+
+    def publish(
+        self, image_rgb: np.ndarray, truth: Any = None, scene_s: float | None = None, answers: int = 0
+    ) -> int:
         """Encode an RGB uint8 (H, W, 3) image as the newest frame; returns its frame number.
 
         `truth` (anything JSON-serialisable) is served at `/truth.json` beside it; `scene_s` (this host's
-        time.monotonic() when the scene shown was current) goes with the frame's stream part.
+        time.monotonic() when the scene shown was current) goes with the frame's stream part. `answers`:
+        every demand up to this number (`asked()`, read before the scene shown) is answered by it.
         """
         image = np.asarray(image_rgb)
         if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
@@ -126,8 +152,54 @@ class MjpegServer:
                 self._truths[number] = truth_json
                 while len(self._truths) > self._truth_history:
                     self._truths.popitem(last=False)
+            self._answered = max(self._answered, answers)
             self._cond.notify_all()
         return number
+
+    # ------------------------------------------------------------------ demands
+    def asked(self) -> tuple[int, bool]:
+        """(the last demand's number if one is unanswered, else 0; whether an unanswered one wants a new
+        frame, not only the truth of the latest one). The publisher reads this before it reads the
+        scene it answers with."""
+        with self._cond:
+            if self._asked <= self._answered:
+                return 0, False
+            return self._asked, self._first_frame_asked() is not None
+
+    def answer(self, upto: int) -> None:
+        """Every demand up to `upto` is answered by the latest frame (its scene has not changed since), up
+        to the first unanswered one for a new frame: only a frame published answers that."""
+        with self._cond:
+            first = self._first_frame_asked()
+            self._answered = max(self._answered, upto if first is None else min(upto, first - 1))
+            self._cond.notify_all()
+
+    def _first_frame_asked(self) -> int | None:
+        """The first demand for a new frame not answered yet (called holding `_cond`)."""
+        asked = self._frames_asked
+        while asked and asked[0] <= self._answered:
+            asked.pop(0)
+        return asked[0] if asked else None
+
+    def wait_asked(self, timeout_s: float) -> bool:
+        """Until a demand is unanswered (True), or `timeout_s` passes."""
+        asked = lambda: self._closing or self._asked > self._answered  # noqa: E731
+        with self._cond:
+            return self._cond.wait_for(asked, timeout_s) and not self._closing
+
+    def ask(self, new_frame: bool, timeout_s: float) -> PublishedFrame | None:
+        """A demand: the latest frame once it answers this demand (on demand), or the first frame published
+        after it (otherwise: the publisher keeps its own pace); None after `timeout_s`."""
+        with self._cond:
+            if not self.on_demand:  # a publisher at its own pace keeps no count of demands
+                return self._newer(-1 if self._latest is None else self._latest.number, timeout_s)
+            self._asked += 1
+            number = self._asked
+            if new_frame:
+                self._frames_asked.append(number)
+            self._cond.notify_all()
+            answered = lambda: self._closing or (self._answered >= number and self._latest is not None)  # noqa: E731
+            return self._latest if self._cond.wait_for(answered, timeout_s) and not self._closing else None
 
     def latest(self) -> PublishedFrame | None:
         with self._cond:
@@ -135,16 +207,13 @@ class MjpegServer:
 
     def wait_newer(self, after_number: int, timeout_s: float) -> PublishedFrame | None:
         """The latest frame if its number is above `after_number`, waiting up to `timeout_s`."""
-        deadline = time.monotonic() + timeout_s
         with self._cond:
-            while not self._closing:
-                if self._latest is not None and self._latest.number > after_number:
-                    return self._latest
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    return None
-                self._cond.wait(remaining)
-        return None
+            return self._newer(after_number, timeout_s)
+
+    def _newer(self, after_number: int, timeout_s: float) -> PublishedFrame | None:
+        """`wait_newer`, holding `_cond`."""
+        newer = lambda: self._closing or (self._latest is not None and self._latest.number > after_number)  # noqa: E731
+        return self._latest if self._cond.wait_for(newer, timeout_s) and not self._closing else None
 
     def truth_json(self, number: int | None) -> str | None:
         """The truth JSON of frame `number` (the latest frame when None)."""
@@ -161,8 +230,10 @@ class MjpegServer:
         return self._closing
 
     def _register(self, thread: threading.Thread, add: bool) -> None:
+        """A stream client's handler, come or gone."""
         with self._cond:
             (self._clients.add if add else self._clients.discard)(thread)
+            self._cond.notify_all()
 
     def close(self, timeout_s: float = 2.0) -> None:
         """Stop serving, end every stream and free the port (idempotent)."""
@@ -218,7 +289,7 @@ class _Handler(BaseHTTPRequestHandler):
             if url.path == "/stream.mjpg":
                 self._stream()
             elif url.path == "/frame.jpg":
-                self._frame()
+                self._frame(url.query)
             elif url.path == "/truth.json":
                 self._truth(url.query)
             else:
@@ -236,12 +307,20 @@ class _Handler(BaseHTTPRequestHandler):
         self.end_headers()
         self.wfile.write(body)
 
-    def _frame(self) -> None:
-        frame = self.server.owner.latest()
+    def _frame(self, query: str) -> None:
+        owner = self.server.owner
+        fresh = owner.on_demand or parse_qs(query).get("fresh", ["0"])[0] not in ("", "0")
+        frame = owner.ask(True, self.server.client_timeout_s) if fresh else owner.latest()
         if frame is None:
-            self.send_error(503, "no frame published yet")
+            if fresh:
+                self.send_error(504, f"no frame within {self.server.client_timeout_s:g} s")
+            else:
+                self.send_error(503, "no frame published yet")
             return
-        self._send_body("image/jpeg", frame.jpeg, {"X-Frame-Number": str(frame.number)})
+        headers = {"X-Frame-Number": str(frame.number)}
+        if frame.scene_s is not None:
+            headers[SCENE_STAMP_HEADER] = format_scene_stamp(frame.scene_s)
+        self._send_body("image/jpeg", frame.jpeg, headers)
 
     def _truth(self, query: str) -> None:
         values = parse_qs(query).get("frame")
@@ -250,7 +329,10 @@ class _Handler(BaseHTTPRequestHandler):
         except ValueError:
             self.send_error(400, f"frame must be an integer, got {values[0]!r}")
             return
-        body = self.server.owner.truth_json(number)
+        owner = self.server.owner
+        if number is None and owner.on_demand:
+            owner.ask(False, TRUTH_WAIT_S)  # the truth of now; else the latest there is, as before
+        body = owner.truth_json(number)
         if body is None:
             self.send_error(404, f"no truth for frame {number if number is not None else '(latest)'}")
             return

@@ -38,7 +38,9 @@ log = logging.getLogger(__name__)
 # Shared pose layout: position ENU (3), quaternion xyzw (4), velocity ENU (3), sim time.
 _POSE_LEN = 11
 POSE_LOCK_TIMEOUT_S = 0.05
-STOP_POLL_S = 0.02  # the render process checks its stop flag at least this often while pacing
+IDLE_POLL_S = 0.005
+"""How often the render process looks at its stop flag, its commands and the drone's pose (its truth's
+extremes) while it renders nothing; a demand for a picture or a truth wakes it at once."""
 
 
 class VideoError(RuntimeError):
@@ -225,36 +227,57 @@ class _Scene:
         self.frozen: tuple[np.ndarray, float] | None = None  # the picture a freeze shows, and its stamp
         self.renders = 0
         self._drawn: tuple[list[float], np.ndarray, dict[str, Any]] | None = None  # pose, picture, truth
+        self._noted: list[float] | None = None  # the last pose the extremes saw
+        self._published: list[float] | None = None  # the pose of the latest frame published
 
-    def draw(self, values: list[float], read_s: float, server: MjpegServer) -> bool:
+    def note(self, values: list[float]) -> None:
+        """The drone's pose now (the shared pose): the truth's extremes see every pose read, drawn or not."""
+        if values != self._noted:
+            self._noted = values
+            ned_m = enu_to_ned(np.asarray(values[0:3]) - self.origin_enu_m)
+            self.extremes.update([float(v) for v in ned_m], [float(v) for v in enu_to_ned(values[7:10])])
+
+    def dead(self, values: list[float]) -> bool:
+        """Whether the injected fault has the stream die by the pose's simulated time (said once)."""
+        dies_at_s = self.faults.dies_at_s
+        if dies_at_s is None or values[10] < dies_at_s:
+            return False
+        log.warning("video: the stream dies at %.1f s (injected fault)", values[10])
+        return True
+
+    def moved(self, values: list[float]) -> bool:
+        """Whether the pose differs from the latest published frame's (whose truth is then not of now)."""
+        return values != self._published
+
+    def draw(self, values: list[float], read_s: float, server: MjpegServer, answers: int = 0) -> bool:
         """Render the drone at `values` (the shared pose, read at `read_s`: the frame's scene stamp) and
-        publish it with its truth (faults applied); False once the injected fault says the stream dies.
+        publish it with its truth (faults applied), answering the server's demands up to `answers`; False
+        once the injected fault says the stream dies.
 
         A pose the last frame showed (the same position, attitude and simulated time: a lockstep that
         stands still while its client reads and plans) is not drawn again: the picture drawn for it is
         published with fresh camera noise, as a camera gives each frame of a scene that stands still."""
         world = self.world
+        self.note(values)
         if self._drawn is None or self._drawn[0] != values:
             p.resetBasePositionAndOrientation(
                 world.drone.body_id, values[0:3], values[3:7], physicsClientId=world.client_id
             )
             render = world.render(with_seg=True, noise=False)
             truth = frame_truth(world, render, values, self.origin_enu_m)
-            self.extremes.update(truth["drone"]["position_ned_m"], truth["drone"]["velocity_ned_m_s"])
-            truth["extremes"] = self.extremes.as_dict()
             self._drawn = (list(values), render.rgb, truth)
             self.renders += 1
         _, clean, truth = self._drawn
         sim_s, faults = values[10], self.faults
-        if faults.dies_at_s is not None and sim_s >= faults.dies_at_s:
-            log.warning("video: the stream dies at %.1f s (injected fault)", sim_s)
+        if self.dead(values):
             return False
         image, scene_s = world.add_noise(clean), read_s
         if faults.freeze_at_s is not None and 0 <= sim_s - faults.freeze_at_s < faults.freeze_for_s:
             self.frozen = (image, scene_s) if self.frozen is None else self.frozen
             image, scene_s = self.frozen  # a frozen camera's picture is of the moment it froze
         if not (faults.drop and self.rng.random() < faults.drop):
-            server.publish(image, truth, scene_s)
+            server.publish(image, {**truth, "extremes": self.extremes.as_dict()}, scene_s, answers)
+            self._published = self._drawn[0]
         return True
 
 
@@ -287,7 +310,7 @@ def _serve(
         return
     try:
         try:
-            server = MjpegServer(config.host, config.port, jpeg_quality=config.jpeg_quality)
+            server = MjpegServer(config.host, config.port, jpeg_quality=config.jpeg_quality, on_demand=True)
         except OSError as exc:
             conn.send(("error", str(exc)))
             return
@@ -307,15 +330,23 @@ def _serve(
                         continue
                     scene = _reset(scene, command, pending, pose, server, conn)
                     next_t = time.monotonic()
+                asked, new_frame = server.asked()  # before the pose: a scene read after every demand
+                values, read_s = _read_pose(pose)
+                scene.note(values)
+                if scene.dead(values):
+                    break
+                streaming = server.stream_clients > 0 and time.monotonic() >= next_t
+                if not (streaming or new_frame or (asked and scene.moved(values))):
+                    server.answer(asked)  # the truth asked for is the latest frame's (0: none asked)
+                    left = next_t - time.monotonic() if server.stream_clients else IDLE_POLL_S
+                    server.wait_asked(min(IDLE_POLL_S, max(0.0, left)))  # a demand wakes it at once
+                    continue
                 t0 = time.monotonic()
-                if not scene.draw(*_read_pose(pose), server=server):
+                if not scene.draw(values, read_s, server=server, answers=asked):
                     break
                 render_s.value += time.monotonic() - t0
                 frames.value += 1
-                next_t = max(next_t + period, time.monotonic())  # at most `fps` frames a wall second
-                while not stop.value and (left := next_t - time.monotonic()) > 0:
-                    if commands.poll(min(STOP_POLL_S, left)):  # a command wakes it at once
-                        break
+                next_t = max(next_t + period, time.monotonic())  # streams: at most `fps` frames a wall second
     finally:
         scene.world.close()
         pending.close()

@@ -196,10 +196,11 @@ def relay_for(
 
 
 def stream_camera_for(stack: ExitStack, sim: SimulatorProcess, mission: Mission) -> StreamCamera:
-    """The simulator's MJPEG stream as the flight's camera, open in `stack`. Off real time it is read with
-    its scene stamps, so that a picture taken once the vehicle stopped is one of where it stopped however
-    slow the render (`perception.fresh_frame`); at real time it is read through FFmpeg, as a real
-    vehicle's stream is."""
+    """The simulator's MJPEG stream as the flight's camera, open in `stack`. Off real time its pictures are
+    asked for one at a time with their scene stamps, so that a picture taken once the vehicle stopped is
+    one of where it stopped however slow the render (`perception.fresh_frame`), and the render process
+    draws only the pictures the flight reads; at real time it is read through FFmpeg, as a real vehicle's
+    stream is."""
     stamps = off_real_time(simulator_speed(mission))
     return stack.enter_context(
         StreamCamera(
@@ -207,6 +208,7 @@ def stream_camera_for(stack: ExitStack, sim: SimulatorProcess, mission: Mission)
             timeout_s=3.0,
             open_timeout_s=10.0,
             scene_stamps=stamps,
+            on_demand=stamps,
             source_alive=lambda: sim.alive,
         )
     )
