@@ -11,14 +11,13 @@ from __future__ import annotations
 import contextlib
 import errno
 import logging
-import select
 import socket
+import time
 
 from drone_inspect_core.ports import ARDUPILOT_JSON_UDP
 from sim_world.ardupilot_bridge.protocol import ServoPacket, ServoPacketError
 
 log = logging.getLogger(__name__)
-
 
 
 class PhysicsLinkError(OSError):
@@ -46,24 +45,23 @@ class JsonPhysicsServer:
             raise PhysicsLinkError(
                 exc.errno, f"cannot listen on UDP {host}:{port} for ArduPilot: {exc.strerror}{hint}"
             ) from exc
-        self._sock.setblocking(False)
         self.address = self._sock.getsockname()
         self.peer: tuple[str, int] | None = None
         self.packets_in = 0
         self.bad_packets = 0
 
     def receive(self, timeout_s: float) -> ServoPacket | None:
-        """The newest servo packet that arrives within `timeout_s` (None if none); older queued ones are
-        dropped (in lockstep there is never more than one)."""
-        ready, _, _ = select.select([self._sock], [], [], max(0.0, timeout_s))
-        if not ready:
-            return None
-        newest = None
+        """The next servo packet that arrives within `timeout_s` (None if none); datagrams that are none
+        are counted and dropped. (In lockstep there is never more than one packet queued: ArduPilot waits
+        for each answer, so no older one is left to drop.)"""
+        sock = self._sock
+        deadline = time.monotonic() + timeout_s
         while True:
+            sock.settimeout(max(0.0, deadline - time.monotonic()))
             try:
-                data, peer = self._sock.recvfrom(512)
-            except BlockingIOError:
-                return newest
+                data, peer = sock.recvfrom(512)
+            except (TimeoutError, BlockingIOError):
+                return None
             try:
                 packet = ServoPacket.parse(data)
             except ServoPacketError as exc:
@@ -74,7 +72,7 @@ class JsonPhysicsServer:
                 log.info("ArduPilot's physics frames come from %s:%d", *peer)
                 self.peer = peer
             self.packets_in += 1
-            newest = packet
+            return packet
 
     def reply(self, data: bytes) -> None:
         """Send the state to ArduPilot (to the sender of the last servo packet)."""

@@ -60,8 +60,11 @@ class ServoPacket:
         )
 
 
-def _vec(values: Sequence[float]) -> str:
-    return "[" + ",".join(f"{float(v):.7g}" for v in values) + "]"
+_STATE = (
+    '\n{"timestamp":%.6f,"imu":{"gyro":[%.7g,%.7g,%.7g],"accel_body":[%.7g,%.7g,%.7g]},'
+    '"position":[%.7g,%.7g,%.7g],"velocity":[%.7g,%.7g,%.7g],"quaternion":[%.7g,%.7g,%.7g,%.7g]'
+)
+"""One reply without its rangefinders and end: one format, since this runs once per physics frame."""
 
 
 def state_json(
@@ -73,17 +76,13 @@ def state_json(
     quaternion_wxyz: Sequence[float],
     rangefinders_m: Sequence[float] = (),
 ) -> bytes:
-    """One reply: compact JSON framed by newlines. A rangefinder reading that is not finite is left out
-    (ArduPilot then keeps its last reading); at most six rangefinders."""
+    """One reply: compact JSON framed by newlines, vectors of 3 and the quaternion of 4 numbers at 7
+    significant digits. A rangefinder reading that is not finite is left out (ArduPilot then keeps its
+    last reading); at most six rangefinders."""
     if len(rangefinders_m) > 6:
         raise ValueError(f"ArduPilot reads at most 6 rangefinders, got {len(rangefinders_m)}")
-    # Written by hand (not json.dumps): the same bytes, and this runs once per physics frame.
-    parts = [
-        f'"timestamp":{timestamp_s:.6f}',
-        f'"imu":{{"gyro":{_vec(gyro_frd_rad_s)},"accel_body":{_vec(accel_frd_m_s2)}}}',
-        f'"position":{_vec(position_ned_m)}',
-        f'"velocity":{_vec(velocity_ned_m_s)}',
-        f'"quaternion":{_vec(quaternion_wxyz)}',
-    ]
-    parts += [f'"rng_{i}":{r:.4f}' for i, r in enumerate(rangefinders_m, start=1) if math.isfinite(r)]
-    return ("\n{" + ",".join(parts) + "}\n").encode()
+    text = _STATE % (
+        timestamp_s, *gyro_frd_rad_s, *accel_frd_m_s2, *position_ned_m, *velocity_ned_m_s, *quaternion_wxyz
+    )  # fmt: skip
+    ranges = "".join(f',"rng_{i}":{r:.4f}' for i, r in enumerate(rangefinders_m, start=1) if math.isfinite(r))
+    return (text + ranges + "}\n").encode()

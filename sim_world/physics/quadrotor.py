@@ -335,8 +335,8 @@ class Quadrotor:
         _, quat = p.getBasePositionAndOrientation(body, physicsClientId=cid)
         vel, _ = p.getBaseVelocity(body, physicsClientId=cid)
         if wind_enu_m_s is not None:
-            wx, wy, wz = (float(v) for v in wind_enu_m_s)
-            vel = (vel[0] - wx, vel[1] - wy, vel[2] - wz)
+            w = wind_enu_m_s
+            vel = (vel[0] - float(w[0]), vel[1] - float(w[1]), vel[2] - float(w[2]))
         vbx, vby, vbz = quat_rotate_inverse(quat, vel)
         cx, cy, cz = self.params.drag_coeff_xyz
         p.applyExternalForce(

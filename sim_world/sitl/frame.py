@@ -16,7 +16,8 @@ attitude; body rates and the specific force of the IMU do not change (the turn i
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -42,22 +43,26 @@ class AutopilotFrame:
     offset_ned_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
     time_offset_s: float = 0.0
 
-    @property
+    @cached_property
     def turn(self) -> np.ndarray:
         return _turn(self.yaw_rad)
 
+    @cached_property
+    def identity(self) -> bool:
+        return self.yaw_rad == 0.0 and not self.offset_ned_m.any() and self.time_offset_s == 0.0
+
     def apply(self, truth: Truth) -> Truth:
-        """`truth` (in the world's frame) as the autopilot is to sense it."""
-        if self.yaw_rad == 0.0 and not self.offset_ned_m.any() and self.time_offset_s == 0.0:
+        """`truth` (in the world's frame) as the autopilot is to sense it (a bridge's every physics frame)."""
+        if self.identity:
             return truth
         turn = self.turn
-        return replace(
-            truth,
+        return Truth(
             time_s=truth.time_s + self.time_offset_s,
             position_ned_m=turn @ truth.position_ned_m + self.offset_ned_m,
             velocity_ned_m_s=turn @ truth.velocity_ned_m_s,
             acceleration_ned_m_s2=turn @ truth.acceleration_ned_m_s2,
             rotation_ned_frd=turn @ truth.rotation_ned_frd,
+            rates_frd_rad_s=truth.rates_frd_rad_s,
         )
 
     def time_s(self, world_time_s: float) -> float:
