@@ -37,6 +37,12 @@ class NewestFrame:
             self.latest = frame
             self.cond.notify_all()
 
+    def pass_over(self) -> None:
+        """Count the newest frame as taken without taking it: `take()` then waits for a later one."""
+        with self.cond:
+            if self.latest is not None:
+                self._taken = max(self._taken, self.latest.frame_number)
+
     def end(self, error: CameraError) -> None:
         """The source is gone for good: `take()` raises `error` once no untaken frame is left."""
         with self.cond:

@@ -219,9 +219,11 @@ class StreamCamera(Camera):
         return number
 
     def read(self, timeout_s: float | None = None) -> Frame:
-        """The newest frame received since the last `read()`; waits up to `timeout_s`."""
+        """The newest frame received since the last `read()` (on demand: the picture this read asked for);
+        waits up to `timeout_s`."""
         timeout = self.timeout_s if timeout_s is None else timeout_s
-        if self._on_demand:
+        if self._on_demand:  # the picture asked for now: not one a read that timed out asked for
+            self._frames.pass_over()
             self._wanted.set()
         with self._cond:
             frame = self._frames.take(timeout, lambda: self._dropped or "stream stalled or frozen")

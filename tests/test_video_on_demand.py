@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from perception.errors import CameraTimeoutError
 from perception.stream_camera import StreamCamera
 from sim_world.rendering.camera import CameraConfig
 from sim_world.rendering.video import VideoConfig, WorldVideoFeed
@@ -124,3 +125,15 @@ def test_a_stream_client_still_gets_frames_at_the_camera_rate(feed: Feed) -> Non
             time.sleep(0.05)
         rate = (camera.frames_received - before) / (time.monotonic() - start)
     assert 10.0 <= rate <= 33.0, rate  # ~20 Hz of new poses, at most 30 frames a second
+
+
+def test_a_read_on_demand_that_timed_out_leaves_no_stale_picture_for_the_next(feed: Feed) -> None:
+    video = feed.video
+    with StreamCamera(video.stream_url, timeout_s=2.0, scene_stamps=True, on_demand=True) as camera:
+        with pytest.raises(CameraTimeoutError):
+            camera.read(timeout_s=0.0005)  # the picture it asked for comes after it gave up
+        time.sleep(0.3)  # ... and waits, untaken
+        feed.move(2.0, 1.0)
+        asked_at = time.monotonic()
+        frame = camera.read()
+        assert frame.scene_s is not None and frame.scene_s >= asked_at  # the picture this read asked for
