@@ -20,6 +20,7 @@ import pybullet as p
 from drone_inspect_core.frames import enu_to_ned
 from drone_inspect_core.world_options import StartPose, WindConfig
 from sim_world.physics.quadrotor import QuadrotorParams
+from sim_world.physics.rotations import quat_rotate_inverse
 from sim_world.process_entry import LauncherRequests
 from sim_world.rendering.camera import CameraConfig
 from sim_world.scene.config import SceneConfig
@@ -31,9 +32,6 @@ SITL_QUAD = QuadrotorParams(landing_gear_stiffness_n_m=3000.0)
 """The project's quadrotor with compliant landing legs (3 mm static deflection, damped): with
 PyBullet's rigid contact a touchdown clipped the accelerometer and an autopilot's height estimate
 diverged."""
-
-ENU_TO_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-FRD_TO_FLU = np.diag([1.0, -1.0, -1.0])
 
 
 def build_sitl_world(
@@ -91,20 +89,25 @@ class TruthReader:
         self._velocity_ned = enu_to_ned(world.state().velocity_enu_m_s)
 
     def read(self) -> Truth:
+        """Once per physics frame of a bridge, so the frame changes are written out as what they are: ENU to
+        NED swaps east and north and turns up into down; FLU to FRD turns left into right and up into down."""
         world = self.world
-        state = world.state()
-        velocity = ENU_TO_NED @ state.velocity_enu_m_s
+        body, cid = world.drone.body_id, world.client_id
+        (px, py, pz), quat = p.getBasePositionAndOrientation(body, physicsClientId=cid)
+        (vx, vy, vz), omega_enu = p.getBaseVelocity(body, physicsClientId=cid)
+        rx, ry, rz = quat_rotate_inverse(quat, omega_enu)  # body FLU rates, as `Quadrotor.state` reads them
+        velocity = np.array((vy, vx, -vz))
         acceleration = (velocity - self._velocity_ned) / self.period_s
         self._velocity_ned = velocity
-        r_enu_flu = np.array(p.getMatrixFromQuaternion(state.quaternion_xyzw.tolist())).reshape(3, 3)
-        rates = state.angular_velocity_flu_rad_s
+        m = p.getMatrixFromQuaternion(quat)  # body FLU to ENU, row by row
+        o = self.origin_enu_m
         return Truth(
             time_s=world.time_s,
-            position_ned_m=ENU_TO_NED @ (state.position_enu_m - self.origin_enu_m),
+            position_ned_m=np.array((py - o[1], px - o[0], -(pz - o[2]))),
             velocity_ned_m_s=velocity,
             acceleration_ned_m_s2=acceleration,
-            rotation_ned_frd=ENU_TO_NED @ r_enu_flu @ FRD_TO_FLU,
-            rates_frd_rad_s=np.array([rates[0], -rates[1], -rates[2]]),
+            rotation_ned_frd=np.array(((m[3], -m[4], -m[5]), (m[0], -m[1], -m[2]), (-m[6], m[7], m[8]))),
+            rates_frd_rad_s=np.array((rx, -ry, -rz)),
         )
 
 
