@@ -165,10 +165,10 @@ def decode_jpeg(data: bytes) -> np.ndarray | None:
     """A JPEG as BGR through OpenCV; None where it is none, `TOO_LARGE` (undecoded) where its header
     announces more than `MAX_PIXELS` (a few bytes can announce gigabytes of pixels)."""
     size = jpeg_size(data)
-    if size is not None and not 0 < size[0] * size[1] <= MAX_PIXELS:
-        return TOO_LARGE
     if size is None:
         return None
+    if not 0 < size[0] * size[1] <= MAX_PIXELS:
+        return TOO_LARGE
     try:
         return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
     except cv2.error:  # OpenCV refuses some broken pictures by raising
@@ -267,10 +267,7 @@ class MjpegHttpCapture(_JpegCounts):
         self._parts = None
         conn, self._conn = self._conn, None
         if conn is not None:
-            sock = conn.sock
-            if sock is not None:
-                with contextlib.suppress(OSError):  # not connected any more
-                    sock.shutdown(socket.SHUT_RDWR)
+            _shut_down(conn)
             conn.close()
 
 
@@ -295,7 +292,7 @@ class MjpegPullCapture(_JpegCounts):
             self.error = f"not an http:// URL: {url!r}"
             return
         self._server = (parts.hostname, parts.port or 80)
-        self._open = True
+        self._open = True  # `_pull` reads it: a `release()` from another thread ends the pulling
         self._open = self._pull(open_timeout_s)[0]  # a picture proves it open; the reads ask for their own
 
     def isOpened(self) -> bool:  # cv2.VideoCapture's name
@@ -330,7 +327,7 @@ class MjpegPullCapture(_JpegCounts):
         """One picture's headers and bytes, all within `timeout_s` (a trickle is cut off at its end)."""
         conn = http.client.HTTPConnection(*self._server, timeout=timeout_s)
         self._conn = conn
-        cut_off = threading.Timer(timeout_s, self._shut, args=(conn,))
+        cut_off = threading.Timer(timeout_s, _shut_down, args=(conn,))
         cut_off.daemon = True
         try:
             conn.connect()
@@ -350,15 +347,16 @@ class MjpegPullCapture(_JpegCounts):
             cut_off.cancel()
             conn.close()
 
-    @staticmethod
-    def _shut(conn: http.client.HTTPConnection) -> None:
-        sock = conn.sock
-        if sock is not None:
-            with contextlib.suppress(OSError):  # not connected any more
-                sock.shutdown(socket.SHUT_RDWR)
-
     def release(self) -> None:
         """No more reads (one blocked in another thread returns False)."""
         self._open = False
         if self._conn is not None:
-            self._shut(self._conn)
+            _shut_down(self._conn)
+
+
+def _shut_down(conn: http.client.HTTPConnection) -> None:
+    """End a connection's socket both ways: a read blocked on it in another thread returns."""
+    sock = conn.sock
+    if sock is not None:
+        with contextlib.suppress(OSError):  # not connected any more
+            sock.shutdown(socket.SHUT_RDWR)

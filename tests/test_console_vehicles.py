@@ -21,12 +21,12 @@ from websockets.sync.client import connect
 from controller.benchmarks.browser import chromium_missing, open_browser, until
 from controller.console.run import ConsoleOptions, open_console
 from controller.missions.schema import load_mission
+from drone_inspect_core.vocabulary import shipped_vocabulary
 from flight.types import FlightMode
 from tests.ardupilot_helpers import ARDUPILOT_DIR, requires_ardupilot
 
 REPO = Path(__file__).resolve().parents[1]
 MISSION = REPO / "missions" / "regression" / "three_targets.yaml"
-SPOKEN = {"gauge": "gauge", "valve": "valve", "switchbox": "switch box"}
 
 
 
@@ -69,7 +69,7 @@ def test_the_console_through_sim_mavlink_holds_on_the_button_a_lost_video_and_a_
         seen = [t for t in session.kit.targets_truth() or [] if t.offset_px is not None]
         far = max(seen, key=lambda t: max(abs(t.offset_px[0]), abs(t.offset_px[1])))
         assert max(abs(v) for v in far.offset_px) > 30, far  # at least a move away
-        page.fill("#instruction", f"centre the {SPOKEN[far.kind]}")
+        page.fill("#instruction", f"centre the {shipped_vocabulary().noun(far.kind)}")
         page.press("#instruction", "Enter")
         until("the loop flying again", lambda: session.phase.value == "centring", 30)
         for child in _children(console.session.kit.info["simulator_pid"]):

@@ -94,7 +94,7 @@ class MjpegServer:
         self._clients: set[threading.Thread] = set()  # stream clients' handlers
         self.on_demand = on_demand
         self._asked = 0  # demands made, numbered from 1
-        self._frames_asked: list[int] = []  # the numbers of demands for a new frame, not yet all answered
+        self._picture_asked = 0  # the number of the last demand for a new frame (not only the truth)
         self._answered = 0  # every demand up to this number is answered
         try:
             self._httpd = _Httpd((host, port), _Handler, self, client_timeout_s)
@@ -164,22 +164,16 @@ class MjpegServer:
         with self._cond:
             if self._asked <= self._answered:
                 return 0, False
-            return self._asked, self._first_frame_asked() is not None
+            return self._asked, self._picture_asked > self._answered
 
     def answer(self, upto: int) -> None:
-        """Every demand up to `upto` is answered by the latest frame (its scene has not changed since), up
-        to the first unanswered one for a new frame: only a frame published answers that."""
+        """Every demand up to `upto` is answered by the latest frame (its scene has not changed since);
+        while a demand for a new frame is unanswered, nothing is: only a frame published answers that, and
+        the demands before it with it."""
         with self._cond:
-            first = self._first_frame_asked()
-            self._answered = max(self._answered, upto if first is None else min(upto, first - 1))
-            self._cond.notify_all()
-
-    def _first_frame_asked(self) -> int | None:
-        """The first demand for a new frame not answered yet (called holding `_cond`)."""
-        asked = self._frames_asked
-        while asked and asked[0] <= self._answered:
-            asked.pop(0)
-        return asked[0] if asked else None
+            if self._picture_asked <= self._answered < upto:
+                self._answered = upto
+                self._cond.notify_all()
 
     def wait_asked(self, timeout_s: float) -> bool:
         """Until a demand is unanswered (True), or `timeout_s` passes."""
@@ -196,7 +190,7 @@ class MjpegServer:
             self._asked += 1
             number = self._asked
             if new_frame:
-                self._frames_asked.append(number)
+                self._picture_asked = number
             self._cond.notify_all()
             answered = lambda: self._closing or (self._answered >= number and self._latest is not None)  # noqa: E731
             return self._latest if self._cond.wait_for(answered, timeout_s) and not self._closing else None
@@ -233,7 +227,6 @@ class MjpegServer:
         """A stream client's handler, come or gone."""
         with self._cond:
             (self._clients.add if add else self._clients.discard)(thread)
-            self._cond.notify_all()
 
     def close(self, timeout_s: float = 2.0) -> None:
         """Stop serving, end every stream and free the port (idempotent)."""

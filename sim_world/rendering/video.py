@@ -234,11 +234,11 @@ class _Scene:
         """The drone's pose now (the shared pose): the truth's extremes see every pose read, drawn or not."""
         if values != self._noted:
             self._noted = values
-            ned_m = enu_to_ned(np.asarray(values[0:3]) - self.origin_enu_m)
-            self.extremes.update([float(v) for v in ned_m], [float(v) for v in enu_to_ned(values[7:10])])
+            position_ned_m, velocity_ned_m_s = _drone_ned(values, self.origin_enu_m)
+            self.extremes.update(position_ned_m.tolist(), velocity_ned_m_s.tolist())
 
     def dead(self, values: list[float]) -> bool:
-        """Whether the injected fault has the stream die by the pose's simulated time (said once)."""
+        """Whether the injected fault has the stream die by the pose's simulated time (and says so)."""
         dies_at_s = self.faults.dies_at_s
         if dies_at_s is None or values[10] < dies_at_s:
             return False
@@ -337,7 +337,8 @@ def _serve(
                     break
                 streaming = server.stream_clients > 0 and time.monotonic() >= next_t
                 if not (streaming or new_frame or (asked and scene.moved(values))):
-                    server.answer(asked)  # the truth asked for is the latest frame's (0: none asked)
+                    if asked:
+                        server.answer(asked)  # the truth asked for is the latest frame's
                     left = next_t - time.monotonic() if server.stream_clients else IDLE_POLL_S
                     server.wait_asked(min(IDLE_POLL_S, max(0.0, left)))  # a demand wakes it at once
                     continue
@@ -414,11 +415,17 @@ def _reset(
     return fresh
 
 
+def _drone_ned(pose: list[float], origin_enu_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The shared pose's position from home and velocity, in NED."""
+    return enu_to_ned(np.asarray(pose[0:3]) - origin_enu_m), enu_to_ned(pose[7:10])
+
+
 def frame_truth(world: World, render: Any, pose: list[float], origin_enu_m: np.ndarray) -> dict[str, Any]:
     """JSON-able truth of one frame: the target in pixels and the drone's pose (ENU and NED from home)."""
     everyone = world.targets_truth(render)  # in the order of scene.targets: the named one first
     truth = everyone[world.scene.named_index]
     position = np.asarray(pose[0:3])
+    position_ned_m, velocity_ned_m_s = _drone_ned(pose, origin_enu_m)
     yaw_enu = world.state().yaw_enu_rad
     return {
         "time_s": round(pose[10], 4),
@@ -444,8 +451,8 @@ def frame_truth(world: World, render: Any, pose: list[float], origin_enu_m: np.n
         },
         "drone": {
             "position_enu_m": _floats(position),
-            "position_ned_m": _floats(enu_to_ned(position - origin_enu_m)),
-            "velocity_ned_m_s": _floats(enu_to_ned(pose[7:10])),
+            "position_ned_m": _floats(position_ned_m),
+            "velocity_ned_m_s": _floats(velocity_ned_m_s),
             "yaw_deg": math.degrees(yaw_enu_to_ned_rad(yaw_enu)),
         },
     }

@@ -20,7 +20,6 @@ import pybullet as p
 from drone_inspect_core.frames import enu_to_ned
 from drone_inspect_core.world_options import StartPose, WindConfig
 from sim_world.physics.quadrotor import QuadrotorParams
-from sim_world.physics.rotations import quat_rotate_inverse
 from sim_world.process_entry import LauncherRequests
 from sim_world.rendering.camera import CameraConfig
 from sim_world.scene.config import SceneConfig
@@ -92,14 +91,14 @@ class TruthReader:
         """Once per physics frame of a bridge, so the frame changes are written out as what they are: ENU to
         NED swaps east and north and turns up into down; FLU to FRD turns left into right and up into down."""
         world = self.world
-        body, cid = world.drone.body_id, world.client_id
-        (px, py, pz), quat = p.getBasePositionAndOrientation(body, physicsClientId=cid)
-        (vx, vy, vz), omega_enu = p.getBaseVelocity(body, physicsClientId=cid)
-        rx, ry, rz = quat_rotate_inverse(quat, omega_enu)  # body FLU rates, as `Quadrotor.state` reads them
+        state = world.state()
+        px, py, pz = state.position_enu_m.tolist()
+        vx, vy, vz = state.velocity_enu_m_s.tolist()
+        rx, ry, rz = state.angular_velocity_flu_rad_s.tolist()
         velocity = np.array((vy, vx, -vz))
         acceleration = (velocity - self._velocity_ned) / self.period_s
         self._velocity_ned = velocity
-        m = p.getMatrixFromQuaternion(quat)  # body FLU to ENU, row by row
+        m = p.getMatrixFromQuaternion(state.quaternion_xyzw.tolist())  # body FLU to ENU, row by row
         o = self.origin_enu_m
         return Truth(
             time_s=world.time_s,
