@@ -168,11 +168,25 @@ def test_ardupilot_sends_its_mavlink_to_loopback_only_with_the_runs_system_id(tm
         defaults = command[command.index("--defaults") + 1].split(",")
         assert (
             defaults[0].endswith("pybullet_quadx.parm")
-            and Path(defaults[1]).read_text() == "WPNAV_SPEED 250\n"
-        )
+            and Path(defaults[1]).read_text() == "LOG_BACKEND_TYPE 0\nWPNAV_SPEED 250\n"
+        )  # no .BIN log written where nobody keeps it
     finally:
         process.close()
     assert not process.workdir.exists()  # the private working folder goes with the run
+
+
+def test_ardupilot_logs_its_flights_where_they_are_kept_and_a_runs_own_params_win(tmp_path: Path) -> None:
+    ardupilot_dir = _fake_ardupilot_dir(tmp_path / "ap")
+    for options, expected in (
+        (ArduPilotOptions(ardupilot_dir, keep_logs_in=tmp_path / "logs"), ""),
+        (ArduPilotOptions(ardupilot_dir, params={"LOG_BACKEND_TYPE": 1}), "LOG_BACKEND_TYPE 1\n"),
+    ):
+        process = ArduPilotProcess(options)
+        try:
+            command = process.command()
+            assert Path(command[command.index("--defaults") + 1].split(",")[1]).read_text() == expected
+        finally:
+            process.close()
 
 
 def test_the_camera_renders_at_its_rate_once_the_motors_spin_and_slowly_before(rig) -> None:

@@ -213,9 +213,24 @@ def test_px4_run_gets_links_its_params_and_a_private_folder(tmp_path: Path) -> N
         assert "param set MPC_XY_VEL_MAX 1.5" in script
         assert "param set COM_OF_LOSS_T 4" in script  # 4× faster than real time: 4× longer timeouts
         assert "param set NAV_MC_ALT_RAD 0.1" in script  # a 0.5 m takeoff climbs to 0.5 m, not to liftoff
+        assert "param set SDLOG_MODE -1" in script  # no .ulg written where nobody keeps it
     finally:
         process.close()
     assert not process.workdir.exists()
+
+
+def test_px4_logs_its_flights_where_they_are_kept_and_a_runs_own_params_win(tmp_path: Path) -> None:
+    px4_dir = _fake_px4_dir(tmp_path / "px4")
+    for options, expected in (
+        (Px4Options(px4_dir, keep_logs_in=tmp_path / "logs"), None),
+        (Px4Options(px4_dir, instance=1, params={"SDLOG_MODE": 0}), "param set SDLOG_MODE 0"),
+    ):
+        process = Px4Process(options).start()
+        try:
+            lines = (process.workdir / "bin" / "px4-rc.params").read_text().splitlines()
+            assert [line for line in lines if "SDLOG_MODE" in line] == ([expected] if expected else [])
+        finally:
+            process.close()
 
 
 def test_speed_scaled_timeouts() -> None:

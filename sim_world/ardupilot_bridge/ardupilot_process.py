@@ -111,6 +111,11 @@ def ardupilot_instance(wanted: int | str) -> AbstractContextManager[int]:
     )
 
 
+NO_FLIGHT_LOG_PARAMS = {"LOG_BACKEND_TYPE": 0.0}
+"""Set on a run whose .BIN logs nobody keeps: ArduPilot logs every armed moment to its working folder,
+which is deleted at the end. A run's own `params` win."""
+
+
 @dataclass(frozen=True)
 class ArduPilotOptions:
     """One ArduCopter SITL run."""
@@ -158,7 +163,8 @@ class ArduPilotProcess(SitlChild):
         binary = arducopter_binary(opts.ardupilot_dir)
         assert binary is not None, "checked by find_ardupilot_dir"
         run_params = self.workdir / "run.parm"
-        run_params.write_text("".join(f"{name} {float(value):g}\n" for name, value in opts.params.items()))
+        params = {**(NO_FLIGHT_LOG_PARAMS if opts.keep_logs_in is None else {}), **opts.params}
+        run_params.write_text("".join(f"{name} {float(value):g}\n" for name, value in params.items()))
         command = [
             str(binary), "--model", "JSON:127.0.0.1", "--speedup", f"{SPEEDUP_NO_LIMIT:g}",
             "--defaults", f"{AIRFRAME_PARAMS},{run_params}", "-I", str(opts.instance),

@@ -103,6 +103,11 @@ default), so a takeoff to 0.5 m, the lowest a mission asks for, ended at liftoff
 Hold kept that height. 0.1 m makes a low takeoff climb to its altitude; a mission's `px4.params` wins."""
 
 
+NO_FLIGHT_LOG_PARAMS = {"SDLOG_MODE": -1.0}
+"""Set on a run whose .ulg logs nobody keeps: PX4's SITL rcS logs from boot to shutdown
+(`SDLOG_MODE 1`, with the estimator-replay topics), written to a working folder deleted at the end."""
+
+
 def speed_scaled_timeouts(speed_factor: float | None) -> dict[str, float]:
     """PX4's link-loss timeouts for a simulation `speed_factor` × real time (what PX4's rcS does with
     PX4_SIM_SPEED_FACTOR, without needing `bc`): a 20 Hz wall-clock setpoint stream is 20/speed Hz
@@ -205,6 +210,8 @@ class Px4Process(SitlChild):
         if self.options.system_id is not None:
             lines.append(f"param set MAV_SYS_ID {self.options.system_id}")
         params = dict(LOW_TAKEOFF_PARAMS)
+        if self.options.keep_logs_in is None:
+            params.update(NO_FLIGHT_LOG_PARAMS)
         params.update(speed_scaled_timeouts(self.options.speed_factor))
         params.update(self.options.params)
         for name, value in params.items():
