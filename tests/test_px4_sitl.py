@@ -109,8 +109,13 @@ def test_a_px4_sitl_mission_is_centred(tmp_path: Path) -> None:
     assert report["setup"]["backend"].startswith("PX4 SITL")
     assert report["vehicle_clock_s"]["ready_s"] > PX4_CLOCK_OFFSET_US / 1e6  # milestones on PX4's clock
     log = mavutil.mavlink_connection(str(tmp_path / "flight.tlog"))
-    heartbeats = [m for m in iter(lambda: log.recv_match(type="HEARTBEAT"), None)]
+    messages = list(iter(lambda: log.recv_match(type=["HEARTBEAT", "COMMAND_LONG", "STATUSTEXT"]), None))
+    heartbeats = [m for m in messages if m.get_type() == "HEARTBEAT"]
     assert heartbeats and heartbeats[0].get_srcSystem() == report["setup"]["px4_system_id"]
+    # The takeoff carried its own altitude (AMSL), and PX4 flew to it rather than to MIS_TAKEOFF_ALT.
+    takeoffs = [m for m in messages if m.get_type() == "COMMAND_LONG" and m.command == 22]
+    assert takeoffs and all(math.isfinite(m.param7) and m.param7 > 400.0 for m in takeoffs)
+    assert not [m.text for m in messages if m.get_type() == "STATUSTEXT" and "default takeoff" in m.text]
     assert list((tmp_path / "px4").glob("*.ulg"))  # PX4's own flight log kept
     assert not session_members(report["setup"]["simulator_pid"])  # simulator, PX4, renderer: all gone
 

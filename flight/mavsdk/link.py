@@ -173,6 +173,7 @@ class TelemetryCache:
         self.battery_percent: float | None = None
         self.local_position_ok = False
         self.home_ok = False
+        self.global_position_ok = False
         self.texts = StatusTexts()
         self.vehicle_time_s = math.nan  # the autopilot's clock, from its ATTITUDE timestamps
         self.forward_range_m: float | None = None
@@ -199,6 +200,7 @@ class TelemetryCache:
 
         def health(d: Any) -> None:
             self.local_position_ok, self.home_ok = d.is_local_position_ok, d.is_home_position_ok
+            self.global_position_ok = d.is_global_position_ok
 
         def battery(d: Any) -> None:
             self.battery_percent = None if math.isnan(d.remaining_percent) else d.remaining_percent

@@ -8,10 +8,12 @@ Written for real PX4 (SITL or hardware) as much as for `dronectl sim-vehicle`:
   ACCEPTED and then refuse), never from the ack alone;
 - offboard is left for Hold before landing (else PX4 returns to OFFBOARD after
   disarm and refuses the next arm); a disarm racing PX4's auto-disarm is success.
-- a takeoff is not idempotent on PX4 (each copy climbs on from where the drone is): it is
-  sent again only while the vehicle shows no sign of it, a climb past `takeoff_overshoot_m`
-  is stopped in Hold, and a vehicle that disarmed on the ground first is armed again and
-  asked again, once (`takeoff`).
+- a takeoff carries its own altitude (NAV_TAKEOFF's param7, AMSL: no parameter to set, and a
+  copy climbs to the same altitude); a vehicle without a global position estimate gets
+  MAVSDK's takeoff to MIS_TAKEOFF_ALT, whose every copy climbs on from where the drone is. It
+  is sent again only while the vehicle shows no sign of it, a climb past
+  `takeoff_overshoot_m` is stopped in Hold, and a vehicle that disarmed on the ground first is
+  armed again and asked again, once (`takeoff`).
 - MAVSDK re-sends the last setpoint at 20 Hz by itself: `set_velocity_body` is
   called only when the command changes or the caller refreshes it, never in a loop.
 - link loss (no telemetry for `link_timeout`, or MAVSDK's connection state
@@ -30,6 +32,7 @@ through it: the callbacks here only store values under a lock.
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import math
 import threading
@@ -39,6 +42,7 @@ from typing import Any
 
 from mavsdk import ComponentType, Configuration, ConnectionResult, Mavsdk
 from mavsdk.plugins.action import Action, ActionError, ActionResult
+from mavsdk.plugins.mavlink_direct import MavlinkDirect, MavlinkDirectError, MavlinkMessage
 from mavsdk.plugins.offboard import Offboard, OffboardError, VelocityBodyYawspeed
 from mavsdk.plugins.telemetry import Telemetry as MavsdkTelemetry
 
@@ -73,6 +77,10 @@ PX4. So `prepare_takeoff` sets it before arming, at least `parameter_save_guard_
 change, and waits."""
 TAKEOFF_ALTITUDE_SAME_M = 0.005
 """A takeoff altitude this close to the one set is not set again."""
+MAV_CMD_NAV_TAKEOFF = 22
+AUTOPILOT_COMPONENT_ID = 1
+REFUSED_AS = {1: "BUSY", 2: "COMMAND_DENIED", 3: "UNSUPPORTED", 4: "FAILED", 6: "CANCELLED"}
+"""A COMMAND_ACK's refusal (MAV_RESULT) by the name MAVSDK's action plugin gives it."""
 
 
 class _DisarmedOnTheGround(Exception):
@@ -106,6 +114,7 @@ class MavsdkVehicle(Vehicle):
         self._system: Any = None
         self._telemetry: MavsdkTelemetry | None = None
         self._action: Action | None = None
+        self._direct: MavlinkDirect | None = None
         self._offboard: Offboard | None = None
         self._setpoint_set = False
         self._last_setpoint = VelocityBody()
@@ -158,6 +167,7 @@ class MavsdkVehicle(Vehicle):
         self._system = system
         self._telemetry = MavsdkTelemetry(system)
         self._action = Action(system)
+        self._direct = MavlinkDirect(system)
         self._offboard = Offboard(system)
         self._cache.subscribe(system, self._telemetry)
         if self.config.clock == "vehicle":
@@ -308,12 +318,13 @@ class MavsdkVehicle(Vehicle):
         self._arm_asked = True
 
     def prepare_takeoff(self, altitude_m: float, timeout_s: float | None = None) -> None:
-        """PX4's takeoff altitude (MIS_TAKEOFF_ALT) set before arming, then `PARAMETER_SAVE_S` for PX4's
-        save of it; `takeoff` sets it only if this was not done for its altitude."""
+        """Nothing where the vehicle has a global position estimate: the takeoff carries its altitude.
+        Otherwise PX4's takeoff altitude (MIS_TAKEOFF_ALT) set before arming, then `PARAMETER_SAVE_S`
+        for PX4's save of it; `takeoff` sets it only if this was not done for its altitude."""
         action = self._require(self._action, "prepare_takeoff()")
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise ValueError(f"takeoff altitude must be a positive number of metres, got {altitude_m!r}")
-        if abs(altitude_m - self._takeoff_altitude_m) <= TAKEOFF_ALTITUDE_SAME_M:
+        if self._has_global_position() or self._takeoff_altitude_set(altitude_m):
             return
         self._wait_out_parameter_save()
         try:
@@ -360,16 +371,64 @@ class MavsdkVehicle(Vehicle):
                     ) from None
 
     def _send_takeoff(self, action: Action, altitude_m: float) -> None:
+        amsl_m = self._takeoff_amsl_m(altitude_m)
         try:
             with self._pacer.blocked():
-                if not abs(altitude_m - self._takeoff_altitude_m) <= TAKEOFF_ALTITUDE_SAME_M:  # unprepared
+                if math.isfinite(amsl_m):
+                    resend_on_timeout(
+                        lambda: self._command_takeoff(amsl_m), self._cache.link, taken=self._takeoff_taken
+                    )
+                    return
+                # No global position: MAVSDK's takeoff, to MIS_TAKEOFF_ALT above where the drone is.
+                if not self._takeoff_altitude_set(altitude_m):  # unprepared
                     resend_on_timeout(lambda: action.set_takeoff_altitude(altitude_m), self._cache.link)
                     self._takeoff_altitude_m = altitude_m
                 resend_on_timeout(action.takeoff, self._cache.link, taken=self._takeoff_taken)
         except ActionError as exc:
-            armed = self.telemetry().armed
-            detail = self._last_text() or ("the vehicle is not armed" if not armed else "")
-            raise CommandDeniedError(exc.origin, exc.result.name, detail) from None
+            raise CommandDeniedError(exc.origin, exc.result.name, self._refusal_detail()) from None
+
+    def _takeoff_altitude_set(self, altitude_m: float) -> bool:
+        return abs(altitude_m - self._takeoff_altitude_m) <= TAKEOFF_ALTITUDE_SAME_M
+
+    def _refusal_detail(self) -> str:
+        return self._last_text() or ("the vehicle is not armed" if not self.telemetry().armed else "")
+
+    def _has_global_position(self) -> bool:
+        with self._cache.lock:
+            return self._cache.global_position_ok
+
+    def _takeoff_amsl_m(self, altitude_m: float) -> float:
+        """`altitude_m` above the ground the vehicle stood on when it was ready, as an AMSL altitude (its
+        global altitude now less its height above that ground); NaN without a global position estimate."""
+        telemetry_plugin = self._telemetry
+        if telemetry_plugin is None or not self._has_global_position():
+            return math.nan
+        amsl_now_m = float(telemetry_plugin.position().absolute_altitude_m)
+        down_m = self.telemetry().position_ned.down_m
+        height_m = self._ground_down_m - down_m if math.isfinite(self._ground_down_m) else 0.0
+        return amsl_now_m - height_m + altitude_m
+
+    def _command_takeoff(self, amsl_m: float) -> None:
+        """NAV_TAKEOFF to `amsl_m` (PX4 and the sim-vehicle read param7 as AMSL), yaw and position left
+        as they are (NaN: JSON null); a refusal or a missing answer raises as MAVSDK's takeoff would."""
+        direct = self._require(self._direct, "takeoff()")
+        target = int(self._system.get_system_id())
+        fields = {
+            "target_system": target, "target_component": AUTOPILOT_COMPONENT_ID,
+            "command": MAV_CMD_NAV_TAKEOFF, "confirmation": 0,
+            "param1": 0.0, "param2": 0.0, "param3": 0.0, "param4": None, "param5": None, "param6": None,
+            "param7": amsl_m,
+        }  # fmt: skip
+        message = MavlinkMessage("COMMAND_LONG", 0, 0, target, AUTOPILOT_COMPONENT_ID, json.dumps(fields))
+        try:
+            ack = direct.send_command(message)
+        except MavlinkDirectError as exc:  # no final ack (TIMEOUT), or no system or connection
+            result = ActionResult.__members__.get(exc.result.name, ActionResult.UNKNOWN)
+            raise ActionError(result, "takeoff()") from None
+        mav_result = json.loads(ack.fields_json).get("result")
+        if mav_result != 0:  # MAV_RESULT_ACCEPTED
+            refused = REFUSED_AS.get(mav_result, f"MAV_RESULT_{mav_result}")
+            raise CommandDeniedError("takeoff()", refused, self._refusal_detail())
 
     def _wait_for_the_climb(self, altitude_m: float, deadline: Deadline) -> None:
         """Done when PX4 says so (it leaves TAKEOFF for HOLD at the altitude), not merely when the climb is
@@ -591,8 +650,9 @@ class MavsdkVehicle(Vehicle):
 
     def close(self) -> None:
         mavsdk, self._mavsdk = self._mavsdk, None
-        plugins = (self._action, self._offboard, self._telemetry, self._system)  # alive until destroy():
-        self._action = self._offboard = self._telemetry = self._system = None  # a pending callback is theirs
+        # Every plugin stays alive until destroy(): a pending callback is theirs.
+        plugins = (self._action, self._direct, self._offboard, self._telemetry, self._system)
+        self._action = self._direct = self._offboard = self._telemetry = self._system = None
         if mavsdk is not None:
             mavsdk.destroy()
         del plugins
