@@ -17,6 +17,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from drone_inspect_core.config_files import from_json, to_json
 from drone_inspect_core.ports import PortInUseError
 from drone_inspect_core.world_options import StartPose, WindConfig
+from sim_world.physics.quadrotor import GRAVITY_M_S2, QuadrotorParams
 from sim_world.px4_bridge.geodesy import HomePoint, magnetic_field_ned_gauss, pressure_hpa, temperature_c
 from sim_world.px4_bridge.instances import px4_instance
 from sim_world.px4_bridge.messages import (
@@ -27,6 +28,7 @@ from sim_world.px4_bridge.messages import (
     ActuatorCommand,
     HilEncoder,
     RotorMapping,
+    px4_airframe_params,
     quaternion_wxyz,
 )
 from sim_world.px4_bridge.px4_process import (
@@ -166,6 +168,17 @@ def test_actuator_controls_become_rotor_speeds_only_while_armed() -> None:
     disarmed = mavlink.MAVLink_hil_actuator_controls_message(6, [0.7] * 16, 1, 1)
     assert mapping.rotor_speeds(ActuatorCommand.from_message(disarmed)) == [0.0] * 4
     assert mapping.rotor_speeds(None) == [0.0] * 4
+
+
+@pytest.mark.parametrize(
+    "quad", [QuadrotorParams(), QuadrotorParams(mass_kg=1.4, max_rotor_speed_rad_s=1300.0)]
+)
+def test_px4_is_told_the_hover_thrust_of_the_quad_it_flies(quad: QuadrotorParams) -> None:
+    hover = px4_airframe_params(quad)["MPC_THR_HOVER"]
+    [rotor_rad_s, *_] = RotorMapping.for_quad(quad).rotor_speeds(ActuatorCommand(0, True, (hover,) * 4, True))
+    assert 4 * quad.kf * rotor_rad_s**2 == pytest.approx(
+        quad.mass_kg * GRAVITY_M_S2, rel=0.005
+    )  # holds it up
 
 
 def _fake_px4_dir(root: Path, airframe: bool = True) -> Path:

@@ -113,7 +113,7 @@ class Px4Bridge:
         self.timing = timing or BridgeTiming()
         self.camera = camera
         self.origin_enu_m = world.state().position_enu_m.copy() if origin_enu_m is None else origin_enu_m
-        self.mapping = RotorMapping(max_rad_s=world.drone.params.max_rotor_speed_rad_s)
+        self.mapping = RotorMapping.for_quad(world.drone.params)
         self._encoder = HilEncoder()
         self._substeps = max(1, round(self.timing.sensor_period_s / world.dt_s))
         if abs(self._substeps * world.dt_s - self.timing.sensor_period_s) > 1e-9:

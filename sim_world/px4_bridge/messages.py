@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from sim_world.physics.quadrotor import GRAVITY_M_S2, QuadrotorParams
 from sim_world.px4_bridge.sensors import BaroReading, GpsReading, ImuReading, Truth
 from sim_world.sitl.rig import quaternion_wxyz
 
@@ -66,11 +67,27 @@ class RotorMapping:
     max_rad_s: float
     idle_rad_s: float = 100.0
 
+    @classmethod
+    def for_quad(cls, quad: QuadrotorParams) -> RotorMapping:
+        return cls(max_rad_s=quad.max_rotor_speed_rad_s)
+
+    def hover_output(self, quad: QuadrotorParams) -> float:
+        """The motor output u at which the four rotors (thrust kf·ω² each) hold `quad`'s weight."""
+        hover_rad_s = math.sqrt(quad.mass_kg * GRAVITY_M_S2 / (4.0 * quad.kf))
+        return (hover_rad_s - self.idle_rad_s) / (self.max_rad_s - self.idle_rad_s)
+
     def rotor_speeds(self, command: ActuatorCommand | None) -> list[float]:
         if command is None or not command.armed:
             return [0.0, 0.0, 0.0, 0.0]
         span = self.max_rad_s - self.idle_rad_s
         return [self.idle_rad_s + u * span for u in command.motors]
+
+
+def px4_airframe_params(quad: QuadrotorParams) -> dict[str, float]:
+    """What PX4 must know of the quad it flies beyond its iris airframe's geometry and tuning: the hover
+    thrust (MPC_THR_HOVER). The iris's 0.5 left the 1 kg quad (hover at 0.638) on the ground for seconds
+    after each takeoff began, until PX4's velocity controller had integrated the difference."""
+    return {"MPC_THR_HOVER": round(RotorMapping.for_quad(quad).hover_output(quad), 3)}
 
 
 class HilEncoder:

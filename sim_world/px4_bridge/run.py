@@ -34,6 +34,7 @@ from sim_world.px4_bridge.link import (
     SimulatorLinkError,
     SimulatorServer,
 )
+from sim_world.px4_bridge.messages import px4_airframe_params
 from sim_world.px4_bridge.px4_process import (
     MAX_INSTANCE,
     Px4Options,
@@ -199,7 +200,7 @@ def run_px4_sim(
                     px4_dir=config.px4_dir,
                     instance=config.instance,
                     system_id=config.system_id,
-                    params=config.params,
+                    params={**px4_airframe_params(world.drone.params), **config.params},
                     keep_logs_in=config.px4_log_dir,
                     speed_factor=MAX_SPEED_FACTOR if config.timing.speed is None else config.timing.speed,
                     console_log=None if config.px4_log_dir is None else config.px4_log_dir / "px4.log",
