@@ -106,7 +106,10 @@ def test_a_vehicle_that_dies_mid_flight_ends_the_mission_with_a_complete_report(
     from controller.missions.runner import run_mission
     from controller.missions.schema import load_mission
 
-    mission = load_mission(_faulty_mission(tmp_path, "{vehicle_dies_at_s: 5.0}"))
+    # At real time, on an idle machine, the controller connects about 3 s after the vehicle starts, its
+    # takeoff ends near 5.6 s and its loop near 7.4 s: 6 s is in the loop (at 5 s one run on a loaded
+    # machine died before the controller had connected; at 7 s one ended during the landing).
+    mission = load_mission(_faulty_mission(tmp_path, "{vehicle_dies_at_s: 6.0}"))
     result = run_mission(mission, tmp_path / "run", media=False)
     assert not result.passed and result.outcome == "aborted"
     assert "LINK_LOST" in (result.error or "")
