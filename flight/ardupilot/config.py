@@ -11,7 +11,6 @@ from flight.safety import FlightTimeouts
 from flight.urls import validate_connection_url
 
 M = mavlink
-M = mavlink
 MESSAGE_RATES_HZ: dict[int, float] = {
     M.MAVLINK_MSG_ID_HEARTBEAT: 4.0,  # mode changes seen within 0.25 s (ArduPilot's default: 1 Hz)
     M.MAVLINK_MSG_ID_ATTITUDE: 50.0,
