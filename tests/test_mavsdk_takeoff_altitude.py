@@ -142,3 +142,11 @@ def test_without_a_global_position_the_takeoff_is_mavsdks_to_mis_takeoff_alt() -
     vehicle.takeoff(1.0, timeout_s=2.0)
     assert direct.sent == [] and action.calls == ["set_takeoff_altitude(1.0)", "takeoff()"]
     assert math.isnan(vehicle._takeoff_amsl_m(1.0))
+
+
+def test_a_global_position_flagged_but_never_received_is_no_altitude() -> None:
+    vehicle, _, _ = _ready_vehicle(0, lambda cache, _n: None)
+    assert vehicle._takeoff_amsl_m(1.0) == pytest.approx(HOME_AMSL_M + 1.0)
+    nan = SimpleNamespace(absolute_altitude_m=math.nan)  # MAVSDK's position before any arrived
+    vehicle._telemetry = SimpleNamespace(position=lambda: nan)  # type: ignore[assignment]
+    assert math.isnan(vehicle._takeoff_amsl_m(1.0))

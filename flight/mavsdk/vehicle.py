@@ -403,10 +403,10 @@ class MavsdkVehicle(Vehicle):
         telemetry_plugin = self._telemetry
         if telemetry_plugin is None or not self._has_global_position():
             return math.nan
-        amsl_now_m = float(telemetry_plugin.position().absolute_altitude_m)
+        amsl_now_m = float(telemetry_plugin.position().absolute_altitude_m)  # NaN until MAVSDK has one
         down_m = self.telemetry().position_ned.down_m
         height_m = self._ground_down_m - down_m if math.isfinite(self._ground_down_m) else 0.0
-        return amsl_now_m - height_m + altitude_m
+        return amsl_now_m - height_m + altitude_m  # NaN (MAVSDK's takeoff) where any of them is
 
     def _command_takeoff(self, amsl_m: float) -> None:
         """NAV_TAKEOFF to `amsl_m` (PX4 and the sim-vehicle read param7 as AMSL), yaw and position left
