@@ -434,12 +434,13 @@ class MavsdkVehicle(Vehicle):
         """Done when PX4 says so (it leaves TAKEOFF for HOLD at the altitude), not merely when the climb is
         slow: a low takeoff (0.5 m) rises slowly all the way, and was taken for finished 0.3 m short of it.
 
-        Bounded above: PX4 takes every NAV_TAKEOFF it receives (MAVSDK sends its altitude as NaN) as a
-        new takeoff to its current altitude plus MIS_TAKEOFF_ALT (navigator's
-        Takeoff::set_takeoff_position), so when acknowledgements are lost MAVSDK's own copies of the
-        command, 0.5 s of wall time apart (seconds of a fast lockstep's clock), can arrive after liftoff
-        and each climb it higher (once to 6.04 m: docs/px4.md). A vehicle that disarms on the ground
-        (PX4 accepts a takeoff while disarmed, and then never leaves the ground) ends the wait at once."""
+        Bounded above: PX4 takes every NAV_TAKEOFF it receives with its altitude NaN (MAVSDK's takeoff,
+        where the vehicle has no global position) as a new takeoff to its current altitude plus
+        MIS_TAKEOFF_ALT (navigator's Takeoff::set_takeoff_position), so when acknowledgements are lost
+        MAVSDK's own copies of the command, 0.5 s of wall time apart (seconds of a fast lockstep's
+        clock), can arrive after liftoff and each climb it higher (once to 6.04 m: docs/px4.md). A
+        vehicle that disarms on the ground (PX4 accepts a takeoff while disarmed, and then never leaves
+        the ground) ends the wait at once."""
         target_m = altitude_m - self.config.altitude_tolerance_m
         limit_m = altitude_m + self.config.takeoff_overshoot_m
 
