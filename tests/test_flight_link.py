@@ -142,3 +142,30 @@ def test_a_command_that_times_out_on_a_silent_vehicle_raises_link_lost_not_a_ref
         resend_on_timeout(land, live, attempts=2)
     with pytest.raises(ActionError):  # no link given: as before
         resend_on_timeout(land, attempts=2)
+
+
+def test_a_command_to_a_simulator_whose_process_exited_is_not_sent_again() -> None:
+    """Each copy waits out MAVSDK's own resends (about 2 s): three copies to a PX4 killed during an
+    offboard stop() ended a mission 6.8 s after the kill instead of at once."""
+    from mavsdk.plugins.offboard import OffboardError, OffboardResult
+
+    from flight.mavsdk.link import resend_on_timeout
+
+    calls = []
+
+    def stop() -> None:
+        calls.append("stop()")
+        raise OffboardError(OffboardResult.TIMEOUT, "stop()")
+
+    alive = [True]
+    link = LinkMonitor(timeout_s=6.0, peer_alive=lambda: alive[0])
+    link.heard()
+    alive[0] = False  # the simulator's process exited
+    with pytest.raises(LinkLostError, match=r"stop\(\).*process has exited"):
+        resend_on_timeout(stop, link, attempts=3)
+    assert calls == ["stop()"]
+    alive[0] = True  # alive and talking, only the acks lost: every copy is sent, as before
+    calls.clear()
+    with pytest.raises(OffboardError):
+        resend_on_timeout(stop, link, attempts=3)
+    assert calls == ["stop()"] * 3

@@ -121,7 +121,7 @@ def resend_on_timeout(
     not (`MavsdkVehicle.takeoff`), and passes `taken`: whether the vehicle already shows the command's
     effect, in which case a TIMEOUT lost only the acknowledgement and nothing is sent again. Any other
     result is raised at once. With `link`, a last TIMEOUT from a vehicle gone silent is a lost link
-    (`LinkLostError`), not a refusal.
+    (`LinkLostError`), not a refusal, and a vehicle already known lost is not sent the command again.
     """
     for attempt in range(1, attempts + 1):
         try:
@@ -134,6 +134,8 @@ def resend_on_timeout(
                 if exc.result.name == "TIMEOUT" and link is not None:
                     link.raise_if_lost(str(exc.origin))
                 raise
+            if link is not None:  # a vehicle known gone (its process exited, or silent past the timeout)
+                link.check(str(exc.origin))  # gets no copy: each would wait out MAVSDK's own resends
             log.warning(
                 "%s timed out (no ack): sending it again (%d of %d)", exc.origin, attempt + 1, attempts
             )
