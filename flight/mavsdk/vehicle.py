@@ -45,6 +45,7 @@ from mavsdk.plugins.action import Action, ActionError, ActionResult
 from mavsdk.plugins.mavlink_direct import MavlinkDirect, MavlinkDirectError, MavlinkMessage
 from mavsdk.plugins.offboard import Offboard, OffboardError, VelocityBodyYawspeed
 from mavsdk.plugins.telemetry import Telemetry as MavsdkTelemetry
+from pymavlink.dialects.v20 import common as mavlink
 
 from flight.errors import (
     CommandDeniedError,
@@ -77,9 +78,13 @@ PX4. So `prepare_takeoff` sets it before arming, at least `parameter_save_guard_
 change, and waits."""
 TAKEOFF_ALTITUDE_SAME_M = 0.005
 """A takeoff altitude this close to the one set is not set again."""
-MAV_CMD_NAV_TAKEOFF = 22
-AUTOPILOT_COMPONENT_ID = 1
-REFUSED_AS = {1: "BUSY", 2: "COMMAND_DENIED", 3: "UNSUPPORTED", 4: "FAILED", 6: "CANCELLED"}
+REFUSED_AS = {
+    mavlink.MAV_RESULT_TEMPORARILY_REJECTED: "BUSY",
+    mavlink.MAV_RESULT_DENIED: "COMMAND_DENIED",
+    mavlink.MAV_RESULT_UNSUPPORTED: "UNSUPPORTED",
+    mavlink.MAV_RESULT_FAILED: "FAILED",
+    6: "CANCELLED",  # MAV_RESULT_CANCELLED, which this pymavlink's common dialect does not name
+}
 """A COMMAND_ACK's refusal (MAV_RESULT) by the name MAVSDK's action plugin gives it."""
 
 
@@ -412,21 +417,21 @@ class MavsdkVehicle(Vehicle):
         """NAV_TAKEOFF to `amsl_m` (PX4 and the sim-vehicle read param7 as AMSL), yaw and position left
         as they are (NaN: JSON null); a refusal or a missing answer raises as MAVSDK's takeoff would."""
         direct = self._require(self._direct, "takeoff()")
-        target = int(self._system.get_system_id())
+        target, autopilot = int(self._system.get_system_id()), mavlink.MAV_COMP_ID_AUTOPILOT1
         fields = {
-            "target_system": target, "target_component": AUTOPILOT_COMPONENT_ID,
-            "command": MAV_CMD_NAV_TAKEOFF, "confirmation": 0,
+            "target_system": target, "target_component": autopilot,
+            "command": mavlink.MAV_CMD_NAV_TAKEOFF, "confirmation": 0,
             "param1": 0.0, "param2": 0.0, "param3": 0.0, "param4": None, "param5": None, "param6": None,
             "param7": amsl_m,
         }  # fmt: skip
-        message = MavlinkMessage("COMMAND_LONG", 0, 0, target, AUTOPILOT_COMPONENT_ID, json.dumps(fields))
+        message = MavlinkMessage("COMMAND_LONG", 0, 0, target, autopilot, json.dumps(fields))
         try:
             ack = direct.send_command(message)
         except MavlinkDirectError as exc:  # no final ack (TIMEOUT), or no system or connection
             result = ActionResult.__members__.get(exc.result.name, ActionResult.UNKNOWN)
             raise ActionError(result, "takeoff()") from None
         mav_result = json.loads(ack.fields_json).get("result")
-        if mav_result != 0:  # MAV_RESULT_ACCEPTED
+        if mav_result != mavlink.MAV_RESULT_ACCEPTED:
             refused = REFUSED_AS.get(mav_result, f"MAV_RESULT_{mav_result}")
             raise CommandDeniedError("takeoff()", refused, self._refusal_detail())
 
