@@ -335,12 +335,13 @@ def _serve(
                 scene.note(values)
                 if scene.dead(values):
                     break
-                streaming = server.stream_clients > 0 and time.monotonic() >= next_t
+                clients = server.stream_clients
+                streaming = clients > 0 and time.monotonic() >= next_t
                 if not (streaming or new_frame or (asked and scene.moved(values))):
                     if asked:
                         server.answer(asked)  # the truth asked for is the latest frame's
-                    left = next_t - time.monotonic() if server.stream_clients else IDLE_POLL_S
-                    server.wait_asked(min(IDLE_POLL_S, max(0.0, left)))  # a demand wakes it at once
+                    left = max(0.0, next_t - time.monotonic()) if clients else IDLE_POLL_S
+                    server.wait_asked(min(IDLE_POLL_S, left))  # a demand wakes it at once
                     continue
                 t0 = time.monotonic()
                 if not scene.draw(values, read_s, server=server, answers=asked):
