@@ -21,16 +21,41 @@ def _requests(lines: bytes) -> LauncherRequests:
     return requests
 
 
-def test_the_world_runs_free_until_paced_then_a_lead_past_each_pace_then_free_after_silence() -> None:
-    unpaced = LockstepPace(_requests(b""), lead_s=0.1, silence_s=0.25)
-    assert not unpaced.holds(5.0)  # no client pacing: free
+def test_the_world_boots_flat_out_then_keeps_real_time_until_paced_then_a_lead_past_each_pace() -> None:
+    unpaced = LockstepPace(_requests(b""), lead_s=0.1, silence_s=0.25, boot_s=10.0)
+    assert not unpaced.holds(5.0) and not unpaced.holds(9.9)  # booting, no client yet: flat out
+    assert not unpaced.holds(10.0)  # booted: real time from here
+    assert unpaced.holds(10.5)  # half a simulated second ahead of the wall clock: wait
     requests = _requests(PACE_LINE)
     assert requests.paces == 1 and requests.take() is None  # a pace is counted, never queued
     pace = LockstepPace(requests, lead_s=0.1, silence_s=0.25)
     assert not pace.holds(2.0)  # the pace just came: 0.1 s more from here
     assert not pace.holds(2.09) and pace.holds(2.1)
-    requests.paced_at -= 1.0  # the client has been silent a second of wall time
-    assert not pace.holds(2.5)
+    requests.paced_at -= 1.0  # the client has been silent a second of wall time: real time
+    assert not pace.holds(2.1)
+    assert pace.holds(2.3)
+    assert not pace.holds(0.05)  # a new world, whose clock starts again: real time from there
+
+
+def test_an_unpaced_loop_boots_flat_out_then_runs_at_the_wall_clocks_pace() -> None:
+    world = SimpleNamespace(time_s=0.0)
+
+    def tick() -> None:
+        world.time_s += 0.004
+
+    stop = threading.Event()
+    pace = LockstepPace(_requests(b""), boot_s=1.0)
+    loop = threading.Thread(
+        target=run_lockstep, args=(lambda: world, tick, stop, None), kwargs={"pace": pace}
+    )
+    started = time.monotonic()
+    loop.start()
+    time.sleep(0.5)
+    stop.set()
+    loop.join(2.0)
+    ran_s = time.monotonic() - started
+    # one simulated second at once (thousands of ticks a second), then no more than the wall clock
+    assert 1.0 + 0.1 <= world.time_s <= 1.0 + ran_s + 0.01, (world.time_s, ran_s)
 
 
 def test_a_paced_loop_ticks_only_as_far_as_the_client_lets_it() -> None:

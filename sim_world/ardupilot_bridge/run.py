@@ -43,6 +43,9 @@ from sim_world.world import World, derived_seed
 log = logging.getLogger(__name__)
 
 STOP_SERVING_S = 3.0  # how long the bridge keeps answering while ArduPilot shuts down
+BOOT_S = 45.0
+"""Simulated seconds ArduPilot runs flat out before its client's first pace (then real time until it
+paces, `rig.LockstepPace`): ArduCopter 4.7 here says "EKF3 IMU0 is using GPS" 41.2-41.3 s after it starts."""
 
 
 @dataclass(frozen=True)
@@ -174,7 +177,7 @@ def run_ardupilot_sim(
                         return _serve(
                             config, stop, ready, bridge, ardupilot, video,
                             None if requests is None else between,
-                            LockstepPace(requests) if paced and requests is not None else None,
+                            LockstepPace(requests, boot_s=BOOT_S) if paced and requests is not None else None,
                         )  # fmt: skip
                     finally:
                         _stop_while_serving(bridge, ardupilot)

@@ -59,6 +59,9 @@ MAGNETIC_MODEL_YEAR = 2025.5
 MAX_SPEED_FACTOR = 10.0
 """For PX4's timeouts, `--speed max` counts as 10× real time (measured here: 2.7× with the 224 px
 camera, 8.9× without, on 2 cores)."""
+BOOT_S = 12.0
+"""Simulated seconds PX4 runs flat out before its client's first pace (then real time until it paces,
+`rig.LockstepPace`): PX4 v1.15.3 here had a global position 2.7 and 7.7 s after it started (two runs)."""
 
 
 @dataclass(frozen=True)
@@ -253,12 +256,13 @@ def run_px4_sim(
                             on_reset(answer if error is None else None, error or None)
 
                     paced = requests is not None and config.timing.speed is None
+                    pace = LockstepPace(requests, boot_s=BOOT_S) if paced and requests is not None else None
                     try:
                         return bridge.run(
                             stop,
                             max_sim_s=remaining,
                             between=None if requests is None else between,
-                            pace=LockstepPace(requests) if paced and requests is not None else None,
+                            pace=pace,
                         )
                     except Px4DisconnectedError as exc:  # what PX4 said last, beside why we gave up
                         raise Px4DisconnectedError(

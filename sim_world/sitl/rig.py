@@ -143,26 +143,44 @@ class LockstepPace:
     the controller ended on the vehicle's clock ran on by as much. Paced, the world may run `lead_s` of
     simulated time past the moment the client last said it waits on the vehicle's clock (a pace request,
     `drone_inspect_core.launcher_requests`, sent by its vehicle backend's waits), so the vehicle runs
-    only while the client waits, flat out. Until the first pace, and once the client has been silent
-    `silence_s` of wall time (a client that stopped must still meet the autopilot's failsafes), it runs
-    free."""
+    only while the client waits, flat out.
 
-    def __init__(self, requests: LauncherRequests, lead_s: float = 0.1, silence_s: float = 0.25) -> None:
-        self.requests, self.lead_s, self.silence_s = requests, lead_s, silence_s
+    Without a client pacing it, the world runs at real time: before the first pace, once the autopilot
+    has had `boot_s` of simulated time flat out to boot (its client is still starting: loading its
+    models, connecting), and once the client has been silent `silence_s` of wall time (a client that
+    stopped must still meet the autopilot's failsafes, and does, in the time they take in the air).
+    Flat out there, the world would only spend the CPU its client needs to start or to think."""
+
+    def __init__(
+        self, requests: LauncherRequests, lead_s: float = 0.1, silence_s: float = 0.25, boot_s: float = 0.0
+    ) -> None:
+        self.requests, self.lead_s, self.silence_s, self.boot_s = requests, lead_s, silence_s, boot_s
         self._seen = 0
         self._until_s = 0.0
+        self._real_time_from: tuple[float, float] | None = None  # (world s, wall s) where it began
 
     def holds(self, world_time_s: float) -> bool:
-        """Whether the world, at `world_time_s`, must wait for the client before its next tick."""
+        """Whether the world, at `world_time_s`, must wait (for the client, or for the wall clock)
+        before its next tick."""
         requests = self.requests
         paces = requests.paces
         if paces == 0:
-            return False
+            return world_time_s >= self.boot_s and self._ahead_of_the_wall(world_time_s)
         if paces != self._seen:
             self._seen, self._until_s = paces, world_time_s + self.lead_s
         if time.monotonic() - requests.paced_at > self.silence_s:
-            return False
+            return self._ahead_of_the_wall(world_time_s)
+        self._real_time_from = None
         return world_time_s >= self._until_s
+
+    def _ahead_of_the_wall(self, world_time_s: float) -> bool:
+        """Real time: whether the world ran further than the wall clock since real time began (a new
+        world, whose clock starts again, begins it again)."""
+        now = time.monotonic()
+        start = self._real_time_from
+        if start is None or world_time_s < start[0]:
+            self._real_time_from = start = (world_time_s, now)
+        return world_time_s - start[0] > now - start[1]
 
     def wait(self, timeout_s: float = 0.005) -> None:
         """Until the client paces again (or `timeout_s`)."""
