@@ -1,14 +1,17 @@
 """The bridge's lockstep loop against `FakeArduPilot`, a stand-in for ArduPilot's JSON sender, and how
 ArduPilot is started. The real ArduPilot is flown in `test_ardupilot_sitl.py`; here the loop's own rules
 are pinned down: one physics frame per servo packet and never without one, a repeated frame answered
-again without stepping, a restart or silence refused, the forward rangefinder; and ArduPilot's command
-line keeps its MAVLink on loopback.
+again without stepping, a restart or silence refused, the forward rangefinder, servo packets only from
+ArduPilot's own process; and ArduPilot's command line keeps its MAVLink on loopback.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import socket
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -29,6 +32,7 @@ from sim_world.ardupilot_bridge.link import ArduPilotSilentError, JsonPhysicsSer
 from sim_world.ardupilot_bridge.protocol import ServoPacket
 from sim_world.scene.config import DEFAULT_SCENE
 from sim_world.sitl.imu import ImuModel, SensorNoise
+from sim_world.sitl.peers import udp_sender_owned_by
 from sim_world.sitl.rig import CameraClock, build_sitl_world
 
 
@@ -209,3 +213,63 @@ def test_the_camera_renders_at_its_rate_once_the_motors_spin_and_slowly_before(r
         thread.join(2.0)
     assert booting == 2
     assert len(captured) - booting == pytest.approx(30, abs=1)
+
+
+_SENDER = """
+import socket, sys
+sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+sock.bind(("127.0.0.1", 0))
+print(sock.getsockname()[1], flush=True)
+for line in sys.stdin:
+    sock.sendto(bytes.fromhex(line.strip()), ("127.0.0.1", int(sys.argv[1])))
+"""
+
+
+def test_servo_packets_are_taken_only_from_the_ardupilot_process_once_it_is_known() -> None:
+    packet = ServoPacket(400, 1, (1500,) * 4 + (0,) * 12).pack()
+    with (
+        JsonPhysicsServer("127.0.0.1", 0) as server,
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as other,
+    ):
+        port = server.address[1]
+        ardupilot = subprocess.Popen(  # stands in for ArduPilot: a process of its own that sends on cue
+            [sys.executable, "-c", _SENDER, str(port)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        try:
+            ardupilot_port = int(ardupilot.stdout.readline())
+            server.expect_pid = ardupilot.pid
+            other.bind(("127.0.0.1", 0))
+            other.sendto(packet, ("127.0.0.1", port))  # a local program that is not ArduPilot, first
+            assert server.receive(0.3) is None
+            assert server.refused_packets == 1 and server.peer is None
+            ardupilot.stdin.write(packet.hex() + "\n")
+            ardupilot.stdin.flush()
+            assert server.receive(5.0) is not None
+            assert server.peer == ("127.0.0.1", ardupilot_port)
+            other.sendto(packet, ("127.0.0.1", port))  # nor can it take over once ArduPilot flies
+            assert server.receive(0.3) is None
+            assert server.refused_packets == 2 and server.peer == ("127.0.0.1", ardupilot_port)
+            server.expect_pid = None  # not told its ArduPilot (a bridge of its own, as the fixture's)
+            other.sendto(packet, ("127.0.0.1", port))
+            assert server.receive(2.0) is not None and server.peer == other.getsockname()
+        finally:
+            ardupilot.kill()
+            ardupilot.wait(5.0)
+
+
+def test_a_udp_sender_is_told_by_its_socket_bound_to_one_address_or_to_every_interface() -> None:
+    with (
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as one,
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as anywhere,
+    ):
+        one.bind(("127.0.0.1", 0))
+        anywhere.bind(("0.0.0.0", 0))
+        for sock in (one, anywhere):
+            sender = ("127.0.0.1", sock.getsockname()[1])  # as a loopback receiver sees it
+            assert udp_sender_owned_by(sender, os.getpid())
+            assert not udp_sender_owned_by(sender, os.getppid())  # another process: not its socket
+        assert not udp_sender_owned_by(("127.0.0.1", 1), os.getpid())  # a port nobody here bound
+        assert not udp_sender_owned_by(("not an address", 5), os.getpid())

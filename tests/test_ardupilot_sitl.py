@@ -13,6 +13,7 @@ import os
 import re
 import secrets
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -34,6 +35,7 @@ from flight.sim_launcher import SimulatorProcess
 from flight.types import VelocityBody
 from sim_world.ardupilot_bridge.ardupilot_process import ardupilot_instance
 from sim_world.ardupilot_bridge.bridge import JsonTiming
+from sim_world.ardupilot_bridge.protocol import ServoPacket
 from sim_world.ardupilot_bridge.run import ArduPilotSimConfig
 from sim_world.ardupilot_bridge.serve import READY_PREFIX
 
@@ -80,6 +82,12 @@ def test_ardupilot_flies_the_world_ready_arm_hover_and_a_half_metre_move(tmp_pat
                     vehicle.sleep(3.0)
                     start = _truth_ned(truth)
                     assert -start[2] > 1.0  # airborne per truth
+                    # Another local program sends full-throttle servo packets to the physics port: not
+                    # ArduPilot's process, so they are dropped and the hover below holds.
+                    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as intruder:
+                        for count in range(20):
+                            full = ServoPacket(400, 10**6 + count, (2000,) * 4 + (0,) * 12).pack()
+                            intruder.sendto(full, ("127.0.0.1", config.json_port))
                     drift, t0 = 0.0, vehicle.time_s()
                     while vehicle.time_s() - t0 < 10.0:
                         vehicle.sleep(0.25)
@@ -100,6 +108,7 @@ def test_ardupilot_flies_the_world_ready_arm_hover_and_a_half_metre_move(tmp_pat
                     vehicle.disarm()
                 assert abs(_truth_ned(truth)[2]) < 0.1  # back on the ground per truth
                 assert not vehicle.telemetry().armed
+            assert "dropped servo packets" in (tmp_path / "sim.log").read_text()
             # Another system id is refused: a run flies only the ArduPilot it launched.
             with pytest.raises(VehicleConnectionError, match="WRONG_VEHICLE"):
                 ArduPilotVehicle(ArduPilotConfig(url=url, expected_system_id=system_id % 254 + 1)).connect(

@@ -3,7 +3,9 @@
 ArduPilot (`--model JSON:127.0.0.1`, instance N) sends every servo packet to 127.0.0.1:9002+10N and
 reads the reply on the socket it sent from, so the server answers each packet to its sender. The
 port is bound at construction (a port in use is an error naming it, before ArduPilot starts), on
-127.0.0.1 only. Datagrams that are not servo packets are counted and dropped.
+127.0.0.1 only. Datagrams that are not servo packets are counted and dropped. Once told its
+ArduPilot's process (`expect_pid`), it takes servo packets only from a socket that process owns
+(`sim_world.sitl.peers`): another local program cannot drive the motors, and is never answered.
 """
 
 from __future__ import annotations
@@ -16,8 +18,11 @@ import time
 
 from drone_inspect_core.ports import ARDUPILOT_JSON_UDP
 from sim_world.ardupilot_bridge.protocol import ServoPacket, ServoPacketError
+from sim_world.sitl.peers import udp_sender_owned_by
 
 log = logging.getLogger(__name__)
+
+MAX_REFUSED_SAID = 8  # senders whose refused packets are said in the log (each once); the rest only counted
 
 
 class PhysicsLinkError(OSError):
@@ -49,6 +54,11 @@ class JsonPhysicsServer:
         self.peer: tuple[str, int] | None = None
         self.packets_in = 0
         self.bad_packets = 0
+        self.expect_pid: int | None = None
+        """Servo packets are taken only from a socket this process owns (`sim_world.sitl.peers`), once set."""
+        self.refused_packets = 0
+        """Servo packets dropped because another process than `expect_pid` sent them."""
+        self._refused_from: set[tuple[str, int]] = set()
 
     def receive(self, timeout_s: float) -> ServoPacket | None:
         """The next servo packet that arrives within `timeout_s` (None if none); datagrams that are none
@@ -69,10 +79,24 @@ class JsonPhysicsServer:
                 log.debug("dropped a datagram from %s:%d: %s", *peer, exc)
                 continue
             if self.peer != peer:
+                if not self._takes_from(peer):
+                    continue
                 log.info("ArduPilot's physics frames come from %s:%d", *peer)
                 self.peer = peer
             self.packets_in += 1
             return packet
+
+    def _takes_from(self, sender: tuple[str, int]) -> bool:
+        """Whether servo packets from `sender` (not the current peer) may fly the drone: with
+        `expect_pid`, only that process's; another's is dropped, counted and said once per sender."""
+        pid = self.expect_pid
+        if pid is None or udp_sender_owned_by(sender, pid):
+            return True
+        self.refused_packets += 1
+        if sender not in self._refused_from and len(self._refused_from) < MAX_REFUSED_SAID:
+            self._refused_from.add(sender)
+            log.warning("dropped servo packets from %s:%d: not ArduPilot (pid %d)", *sender, pid)
+        return False
 
     def reply(self, data: bytes) -> None:
         """Send the state to ArduPilot (to the sender of the last servo packet)."""

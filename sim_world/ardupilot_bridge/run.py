@@ -158,6 +158,7 @@ def run_ardupilot_sim(
                 camera = None if video is None else CameraClock(video.capture, config.timing.camera_fps)
                 bridge = ArduPilotBridge(world, server, imu, config.timing, camera, origin)
                 with ArduPilotProcess(_options(config)) as ardupilot:
+                    server.expect_pid = ardupilot.pid  # its servo packets, and no one else's
                     facts: list[ArduPilotSimReady] = []  # the ready facts, which a reset answers with too
 
                     def ready(info: ArduPilotSimReady) -> None:

@@ -7,9 +7,9 @@ the port, before PX4 starts), accepts exactly one client, and reads whole MAVLin
 frames from the byte stream.
 
 It takes only its PX4: with `expect_pid` a connection is accepted only when that process
-owns the other end (Linux: the socket's inode, /proc/net/tcp and /proc/PID/fd); any other
-local program that dials in first is closed at once and said once, whatever it sends. Once
-PX4 is connected the listening socket is closed, so nobody else can even connect.
+owns the other end (`sim_world.sitl.peers`); any other local program that dials in first is
+closed at once and said once, whatever it sends. Once PX4 is connected the listening socket is
+closed, so nobody else can even connect.
 """
 
 from __future__ import annotations
@@ -17,7 +17,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import logging
-import os
 import select
 import socket
 import time
@@ -25,9 +24,9 @@ import time
 from pymavlink.dialects.v20 import common as mavlink
 
 from drone_inspect_core.ports import PX4_SIMULATOR_TCP
+from sim_world.sitl.peers import tcp_connection_owned_by
 
 log = logging.getLogger(__name__)
-
 
 
 class SimulatorLinkError(OSError):
@@ -36,43 +35,6 @@ class SimulatorLinkError(OSError):
 
 class Px4DisconnectedError(ConnectionError):
     """PX4 closed the simulator connection (it exited or was killed)."""
-
-
-def connection_owned_by(conn: socket.socket, pid: int) -> bool:
-    """Whether process `pid` owns the other end of the loopback TCP connection `conn` (Linux /proc).
-    False when that cannot be told: a connection we cannot vouch for is not PX4's."""
-    peer, local = conn.getpeername(), conn.getsockname()
-    inode = _tcp_inode(peer, local)
-    if inode is None:
-        return False
-    wanted = f"socket:[{inode}]"
-    try:
-        for fd in os.listdir(f"/proc/{pid}/fd"):
-            with contextlib.suppress(OSError):
-                if os.readlink(f"/proc/{pid}/fd/{fd}") == wanted:
-                    return True
-    except OSError:
-        return False
-    return False
-
-
-def _tcp_inode(local: tuple[str, int], remote: tuple[str, int]) -> int | None:
-    """The inode of the IPv4 TCP socket bound to `local` and connected to `remote` (/proc/net/tcp)."""
-
-    def hexed(address: tuple[str, int]) -> str:
-        packed = socket.inet_aton(address[0])
-        return f"{int.from_bytes(packed, 'little'):08X}:{address[1]:04X}"
-
-    want_local, want_remote = hexed(local), hexed(remote)
-    try:
-        with open("/proc/net/tcp") as table:
-            for line in table.readlines()[1:]:
-                fields = line.split()
-                if fields[1] == want_local and fields[2] == want_remote:
-                    return int(fields[9])
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
 
 
 class SimulatorServer:
@@ -119,7 +81,7 @@ class SimulatorServer:
                     errno.ETIMEDOUT, f"PX4 did not connect to {where} within {timeout_s:.0f} s"
                 )
             conn, peer = self._listener.accept()
-            if expect_pid is None or connection_owned_by(conn, expect_pid):
+            if expect_pid is None or tcp_connection_owned_by(conn, expect_pid):
                 break
             self.refused += 1
             if self.refused == 1:
