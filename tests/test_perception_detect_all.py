@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from drone_inspect_core.vocabulary import colour_name, shipped_vocabulary
+from perception import attributes
 from perception.attributes import read_attribute
 from perception.detector_model import CentreNet, DetectorConfig
 from perception.image_detector import ImageDetector
@@ -94,6 +95,30 @@ def test_read_attribute_on_synthetic_trim() -> None:
         box[18:46, 22:42] = (240, 238, 230)
         assert read_attribute(box, (20.0, 16.0, 44.0, 48.0), "switchbox") == name
     assert read_attribute(np.zeros((8, 8, 3), np.uint8), (3.0, 3.0, 3.5, 3.5), "gauge") is None
+
+
+def test_a_ring_cut_by_the_images_edge_is_read_from_its_whole_box() -> None:
+    """A gauge whose left third lies beyond the image: the detector's box ends at the edge, so the box's
+    own annulus falls inside the white dial (read grey); grown past the edge to the ring's uncut height,
+    it finds the bezel. Cut on two sides, the box is used as it is."""
+    yy, xx = np.mgrid[0:64, 0:64]
+    r = np.hypot(xx + 0.5 - 6, yy + 0.5 - 32)  # centre 6 px from the left edge, radius 14
+    for colour in shipped_vocabulary().colours.values():
+        image = np.empty((64, 64, 3), np.uint8)
+        image[:] = (150, 70, 50)
+        image[r < 14] = colour.rgb
+        image[r < 11] = (245, 242, 235)
+        assert read_attribute(image, (0.0, 18.0, 20.0, 46.0), "gauge") == colour.name, colour.name
+        assert read_attribute(image, (0.0, 18.0, 20.0, 46.0), "valve") == colour.name, colour.name
+    cornered = (0.0, 0.0, 20.0, 10.0)  # cut by two edges: nothing to grow it from
+    assert attributes._beyond_the_edge(cornered, 64, 64) == cornered
+    assert attributes._beyond_the_edge((10.0, 54.0, 38.0, 64.0), 64, 64) == (
+        10.0,
+        54.0,
+        38.0,
+        82.0,
+    )  # past the bottom
+    assert attributes._beyond_the_edge((10.0, 20.0, 38.0, 40.0), 64, 64) == (10.0, 20.0, 38.0, 40.0)
 
 
 def test_a_small_gauges_saturated_bezel_is_not_outvoted_by_its_dial() -> None:
@@ -184,6 +209,7 @@ def test_a_target_cut_by_the_frame_edge_has_its_colour_read_around_its_whole_box
         assert found  # seen: its centre is in the frame
         right += found[0].attribute == colour
         right_if_clipped += read_attribute(image, found[0].bbox_px, kind) == colour
-    # Measured 16 of 16 around the whole box, 12 of 16 around the clipped one (its rim on the target's face;
-    # 14 and 4 before a gauge's saturated bezel outvoted its dial: `attributes._saturated_bezel`).
-    assert right >= len(renders) - 2 and right > right_if_clipped + 2, (right, right_if_clipped)
+    # Measured 16 of 16 around the whole box. Around the clipped one 12 of 16 (its rim on the target's
+    # face; 4 before a gauge's saturated bezel outvoted its dial: `attributes._saturated_bezel`) until a
+    # round target's box cut by the edge was grown past it (`attributes._beyond_the_edge`): 16 of 16.
+    assert right >= len(renders) - 2 and right_if_clipped >= len(renders) - 2, (right, right_if_clipped)
