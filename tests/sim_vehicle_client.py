@@ -134,7 +134,9 @@ class MavlinkTestClient:
         """Send COMMAND_LONG; return the results of the acks that arrive within 0.2 s of the first.
 
         As the MAVLink command protocol (and MAVSDK) does, a command not acked within `timeout_s` is
-        sent once more with `confirmation` 1; the ack must then come within the rest of the wait."""
+        sent once more with `confirmation` 1; the ack must then come within the rest of the wait. The
+        vehicle answers each copy, so after a resend each result is counted once (a loaded machine can
+        ack the first copy late, beside the second's ack)."""
         p = [*params, *[0.0] * (7 - len(params))]
         t0 = time.monotonic()
         self.send(mavlink.MAVLink_command_long_message(target, 1, command, 0, *p))
@@ -142,13 +144,16 @@ class MavlinkTestClient:
         def acked(m: Msg) -> bool:
             return m.command == command
 
+        resent = False
         try:
             self.wait_for("COMMAND_ACK", timeout_s / WAIT_SLACK, acked, after=t0)
         except TimeoutError:
             self.send(mavlink.MAVLink_command_long_message(target, 1, command, 1, *p))
+            resent = True
             self.wait_for("COMMAND_ACK", timeout_s * (WAIT_SLACK - 1) / WAIT_SLACK, acked, after=t0)
         time.sleep(0.2)
-        return [r.msg.result for r in self.since(t0, "COMMAND_ACK") if r.msg.command == command]
+        results = [r.msg.result for r in self.since(t0, "COMMAND_ACK") if r.msg.command == command]
+        return list(dict.fromkeys(results)) if resent else results
 
     def setpoint(self, frame: int, vx: float, vy: float, vz: float, yaw_rate: float = 0.0) -> None:
         self.send(
