@@ -22,7 +22,7 @@ from sim_world.sitl.peers import udp_sender_owned_by
 
 log = logging.getLogger(__name__)
 
-MAX_REFUSED_SAID = 8  # senders whose refused packets are said in the log (each once); the rest only counted
+MAX_REFUSED_SENDERS = 64  # refused senders remembered: said once each, and refused without looking again
 
 
 class PhysicsLinkError(OSError):
@@ -90,12 +90,15 @@ class JsonPhysicsServer:
         """Whether servo packets from `sender` (not the current peer) may fly the drone: with
         `expect_pid`, only that process's; another's is dropped, counted and said once per sender."""
         pid = self.expect_pid
-        if pid is None or udp_sender_owned_by(sender, pid):
+        if pid is None:
             return True
+        if sender not in self._refused_from:  # /proc is read once per sender, not once per packet
+            if udp_sender_owned_by(sender, pid):
+                return True
+            if len(self._refused_from) < MAX_REFUSED_SENDERS:
+                self._refused_from.add(sender)
+                log.warning("dropped servo packets from %s:%d: not ArduPilot (pid %d)", *sender, pid)
         self.refused_packets += 1
-        if sender not in self._refused_from and len(self._refused_from) < MAX_REFUSED_SAID:
-            self._refused_from.add(sender)
-            log.warning("dropped servo packets from %s:%d: not ArduPilot (pid %d)", *sender, pid)
         return False
 
     def reply(self, data: bytes) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import os
 import socket
+from collections.abc import Callable
 
 
 def tcp_connection_owned_by(conn: socket.socket, pid: int) -> bool:
@@ -17,7 +18,8 @@ def tcp_connection_owned_by(conn: socket.socket, pid: int) -> bool:
         peer, local = conn.getpeername(), conn.getsockname()
     except OSError:
         return False
-    inodes = _inodes("/proc/net/tcp", lambda fields: fields[1] == _hexed(peer) and fields[2] == _hexed(local))
+    want_local, want_remote = _hexed(peer), _hexed(local)  # the other end's row: bound there, connected here
+    inodes = _inodes("/proc/net/tcp", lambda fields: fields[1] == want_local and fields[2] == want_remote)
     return _owns_one_of(pid, inodes)
 
 
@@ -37,7 +39,7 @@ def _hexed(address: tuple[str, int]) -> str:
     return f"{int.from_bytes(packed, 'little'):08X}:{address[1]:04X}"
 
 
-def _inodes(table: str, wanted) -> set[int]:  # type: ignore[no-untyped-def]
+def _inodes(table: str, wanted: Callable[[list[str]], bool]) -> set[int]:
     """The inodes of the sockets in the /proc/net `table` whose row `wanted(fields)` picks."""
     found = set()
     try:
