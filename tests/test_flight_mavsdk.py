@@ -13,8 +13,10 @@ import time
 from collections.abc import Iterator
 
 import pytest
+from pymavlink import mavutil
 from sim_vehicle_process import SimVehicleOptions, SimVehicleProcess
 
+from drone_inspect_core.state_streams import LANDED_STATE_HZ
 from flight.errors import CommandDeniedError, ConnectionUrlError, LinkLostError, OffboardInterruptedError
 from flight.mavsdk.vehicle import MavsdkConfig, MavsdkVehicle
 from flight.moves import execute_move
@@ -57,8 +59,9 @@ def sim() -> Iterator[SimVehicleProcess]:
 
 
 @pytest.fixture(scope="module")
-def relay(sim: SimVehicleProcess) -> Iterator[MavlinkRelay]:
-    with MavlinkRelay(listen_port=BASE_PORT + 1, client_port=BASE_PORT + 2) as r:
+def relay(sim: SimVehicleProcess, tmp_path_factory: pytest.TempPathFactory) -> Iterator[MavlinkRelay]:
+    tlog = tmp_path_factory.mktemp("relay") / "flight.tlog"
+    with MavlinkRelay(listen_port=BASE_PORT + 1, client_port=BASE_PORT + 2, tlog_path=tlog) as r:
         yield r
 
 
@@ -94,6 +97,19 @@ def test_refusals_on_the_ground(vehicle: MavsdkVehicle) -> None:
         vehicle.takeoff(2.0)
     assert "not armed" in info.value.detail or "arm" in info.value.detail.lower()
     assert not vehicle.telemetry().armed
+
+
+def test_the_backend_asks_for_the_landed_state_at_its_rate(
+    vehicle: MavsdkVehicle, relay: MavlinkRelay
+) -> None:
+    # MAVSDK's Action plugin asks the vehicle for EXTENDED_SYS_STATE at 1 Hz when it starts; the backend
+    # asks for LANDED_STATE_HZ after it, and every takeoff and landing is confirmed that much sooner.
+    time.sleep(1.5)
+    assert relay.path is not None
+    log = mavutil.mavlink_connection(str(relay.path))
+    stamps = [m._timestamp for m in iter(lambda: log.recv_match(type="EXTENDED_SYS_STATE"), None)]
+    last_second = [t for t in stamps if t >= stamps[-1] - 1.0]
+    assert len(last_second) >= 0.6 * LANDED_STATE_HZ, stamps[-12:]
 
 
 def test_bad_url_is_refused_before_mavsdk_sees_it() -> None:

@@ -17,9 +17,9 @@ from pymavlink.dialects.v20 import common as M
 from sim_vehicle_client import served_vehicle
 
 from controller.benchmarks.hostile_mavlink import hostile_commands, hostile_messages, random_datagrams
+from drone_inspect_core.state_streams import HEARTBEAT_HZ
 from flight.relay import MavlinkRelay
 from flight.urls import udpin_address
-from sim_world.vehicle.telemetry import HEARTBEAT_HZ
 
 DENIED = M.MAV_RESULT_DENIED
 

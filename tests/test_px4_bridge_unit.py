@@ -42,6 +42,7 @@ from sim_world.px4_bridge.px4_process import (
 )
 from sim_world.px4_bridge.run import Px4SimConfig
 from sim_world.px4_bridge.sensors import SensorNoise, SensorSuite, Truth
+from sim_world.vehicle.telemetry import DEFAULT_RATES_HZ
 
 ZURICH = HomePoint()
 
@@ -277,10 +278,16 @@ def test_a_run_that_chooses_px4s_ports_runs_one_link_on_them(tmp_path: Path) -> 
     try:
         links = process.workdir / "bin"
         assert "simulator_mavlink start -c 41001" in (links / "px4-rc.simulator").read_text()
-        mavlink = (links / "px4-rc.mavlink").read_text()
-        starts = [line for line in mavlink.splitlines() if line.startswith("mavlink start")]
+        script = (links / "px4-rc.mavlink").read_text()
+        starts = [line for line in script.splitlines() if line.startswith("mavlink start")]
         assert starts == ["mavlink start -x -u 41002 -r 4000000 -f -m onboard -o 41003"]  # no GCS link
-        assert "mavlink stream -r 10 -s HEARTBEAT -u 41002" in mavlink.splitlines()  # modes seen in 0.1 s
+        assert "mavlink stream -r 10 -s HEARTBEAT -u 41002" in script.splitlines()  # modes seen in 0.1 s
+        assert "mavlink stream -r 10 -s EXTENDED_SYS_STATE -u 41002" in script.splitlines()  # landings too
+        assert "mavlink stream -r 0 -s HIGHRES_IMU -u 41002" in script.splitlines()  # nobody reads it
+        for msg_id, rate_hz in DEFAULT_RATES_HZ.items():  # what the sim-vehicle streams, at its rates
+            if rate_hz > 0:
+                name = mavlink.mavlink_map[msg_id].msgname
+                assert f"mavlink stream -r {rate_hz:g} -s {name} -u 41002" in script.splitlines()
     finally:
         process.close()
     assert not (Px4Process(Px4Options(tmp_path / "px4")).workdir / "bin" / "px4-rc.mavlink").exists()

@@ -16,6 +16,7 @@ import subprocess
 import sys
 import time
 import urllib.request
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -109,7 +110,17 @@ def test_a_px4_sitl_mission_is_centred(tmp_path: Path) -> None:
     assert report["setup"]["backend"].startswith("PX4 SITL")
     assert report["vehicle_clock_s"]["ready_s"] > PX4_CLOCK_OFFSET_US / 1e6  # milestones on PX4's clock
     log = mavutil.mavlink_connection(str(tmp_path / "flight.tlog"))
-    messages = list(iter(lambda: log.recv_match(type=["HEARTBEAT", "COMMAND_LONG", "STATUSTEXT"]), None))
+    kinds = ["HEARTBEAT", "COMMAND_LONG", "STATUSTEXT", "EXTENDED_SYS_STATE", "ATTITUDE", "HIGHRES_IMU"]
+    messages = list(iter(lambda: log.recv_match(type=kinds), None))
+    counts = Counter(m.get_type() for m in messages)
+    boot_ms = [m.time_boot_ms for m in messages if m.get_type() == "ATTITUDE"]
+    flown_s = (boot_ms[-1] - boot_ms[0]) / 1000.0  # PX4's clock over the recording
+    # The landed state at 10 Hz of PX4's clock, as the link was started and the backend asked (MAVSDK's
+    # Action plugin asks for 1 Hz), and none of the onboard streams no client of ours reads.
+    assert counts["EXTENDED_SYS_STATE"] >= 8.0 * flown_s, (counts, flown_s)
+    assert counts["ATTITUDE"] <= 60.0 * flown_s, (counts, flown_s)
+    imu_ms = [m.time_usec / 1000.0 for m in messages if m.get_type() == "HIGHRES_IMU"]
+    assert not [t for t in imu_ms if t > boot_ms[0] + 2000.0], counts  # (sent until the link is set up)
     heartbeats = [m for m in messages if m.get_type() == "HEARTBEAT"]
     assert heartbeats and heartbeats[0].get_srcSystem() == report["setup"]["px4_system_id"]
     # The takeoff carried its own altitude (AMSL), and PX4 flew to it rather than to MIS_TAKEOFF_ALT.

@@ -15,13 +15,14 @@ import pytest
 from pymavlink.dialects.v20 import common as M
 from sim_vehicle_client import MavlinkTestClient
 
+from drone_inspect_core.state_streams import HEARTBEAT_HZ
 from sim_world.rendering.camera import CameraConfig
 from sim_world.vehicle import px4_modes as modes
 from sim_world.vehicle.commander import CommanderConfig
 from sim_world.vehicle.config import SimVehicleConfig
 from sim_world.vehicle.params import ParameterStore, encode_param_value
 from sim_world.vehicle.server import SimVehicle
-from sim_world.vehicle.telemetry import HEARTBEAT_HZ, HomePoint
+from sim_world.vehicle.telemetry import HomePoint
 from sim_world.vehicle.world_model import WorldVehicleModel
 from sim_world.world import World, WorldConfig
 

@@ -22,6 +22,7 @@ from mavsdk.plugins.action import ActionError
 from mavsdk.plugins.offboard import OffboardError
 from mavsdk.plugins.telemetry import Telemetry as MavsdkTelemetry
 
+from drone_inspect_core.state_streams import LANDED_STATE_HZ
 from flight.link import LinkMonitor
 from flight.safety import FlightTimeouts
 from flight.status_texts import StatusTexts
@@ -76,6 +77,10 @@ class MavsdkConfig:
     vehicle's clock. MAVSDK re-sends it at 20 Hz of wall time, which a vehicle k times faster than real
     time sees at 20/k Hz (PX4 wants more than 2 Hz), and a lockstepped sim-vehicle advances only as
     setpoints arrive: a stream on its own clock keeps both as at ×1."""
+    landed_state_rate_hz: float | None = LANDED_STATE_HZ
+    """Asked of the vehicle once connected (EXTENDED_SYS_STATE, SET_MESSAGE_INTERVAL): MAVSDK's Action
+    plugin asks for 1 Hz when it starts, overriding the rate the vehicle was started with, and every
+    takeoff and landing is confirmed from it (`drone_inspect_core.state_streams`). None: not asked."""
     parameter_save_guard_s: float = PX4_PARAMETER_SAVE_GUARD_S
     """Seconds (of `clock`) after the vehicle last armed or disarmed before `prepare_takeoff` sets a
     parameter: PX4 saves its parameters after either (see `PX4_PARAMETER_SAVE_GUARD_S`). 0: a vehicle that
@@ -91,6 +96,8 @@ class MavsdkConfig:
             raise ValueError("MavsdkConfig: link_timeout_s, arm_retry_period_s and poll_s must be > 0")
         if not self.offboard_stream_period_s > 0:
             raise ValueError("MavsdkConfig: offboard_stream_period_s must be > 0")
+        if self.landed_state_rate_hz is not None and not 0 < self.landed_state_rate_hz <= 100:
+            raise ValueError("MavsdkConfig: landed_state_rate_hz must be in (0, 100] or None")
         if not 0 <= self.parameter_save_guard_s < math.inf:
             raise ValueError("MavsdkConfig: parameter_save_guard_s must be >= 0")
         if not 0 < self.takeoff_overshoot_m < math.inf:

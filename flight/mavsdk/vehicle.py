@@ -45,6 +45,7 @@ from mavsdk.plugins.action import Action, ActionError, ActionResult
 from mavsdk.plugins.mavlink_direct import MavlinkDirect, MavlinkDirectError, MavlinkMessage
 from mavsdk.plugins.offboard import Offboard, OffboardError, VelocityBodyYawspeed
 from mavsdk.plugins.telemetry import Telemetry as MavsdkTelemetry
+from mavsdk.plugins.telemetry import TelemetryError
 from pymavlink.dialects.v20 import common as mavlink
 
 from flight.errors import (
@@ -175,6 +176,7 @@ class MavsdkVehicle(Vehicle):
         self._direct = MavlinkDirect(system)
         self._offboard = Offboard(system)
         self._cache.subscribe(system, self._telemetry)
+        self._ask_landed_state_rate()
         if self.config.clock == "vehicle":
             deadline = time.monotonic() + timeout_s
             while math.isnan(self._cache.vehicle_time_s):
@@ -185,6 +187,22 @@ class MavsdkVehicle(Vehicle):
                     )
                 time.sleep(0.01)
         log.info("connected to an autopilot on %s (system id %d)", url, system.get_system_id())
+
+    def _ask_landed_state_rate(self) -> None:
+        """Ask for EXTENDED_SYS_STATE at `landed_state_rate_hz` (after Action's own request for 1 Hz, which
+        the vehicle then has had first). A vehicle that refuses keeps its rate: said once, not fatal."""
+        rate_hz = self.config.landed_state_rate_hz
+        if rate_hz is None or self._telemetry is None:
+            return
+        try:
+            self._telemetry.set_rate_in_air(rate_hz)
+        except TelemetryError as exc:
+            log.warning(
+                "the vehicle did not take EXTENDED_SYS_STATE at %g Hz (%s): takeoffs and landings are "
+                "confirmed at its own rate",
+                rate_hz,
+                exc.result.name,
+            )
 
     def _where(self) -> str:
         """The URL for messages: the user's, and where MAVSDK really listens if that differs."""

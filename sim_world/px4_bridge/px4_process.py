@@ -35,8 +35,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from pymavlink.dialects.v20 import common as mavlink
+
 from sim_world.sitl.children import SitlChild, find_sitl_dir
-from sim_world.vehicle.telemetry import HEARTBEAT_HZ
+from sim_world.vehicle.telemetry import DEFAULT_RATES_HZ
 
 log = logging.getLogger(__name__)
 
@@ -236,21 +238,41 @@ def _simulator_script(ports: Px4Ports) -> str:
     return "\n".join(lines) + "\n"
 
 
-STATE_STREAM_RATES_HZ = {"HEARTBEAT": float(HEARTBEAT_HZ), "EXTENDED_SYS_STATE": 10.0}
-"""The API link's state streams, faster than PX4's 1 Hz (as its own px4-rc.mavlink sets the GCS link's
-streams): a client confirms every mode change and arming from the HEARTBEAT and the landed state from
-EXTENDED_SYS_STATE, and at 1 Hz of PX4's clock each confirmation waited up to a simulated second (four
-or five per mission, ~20 % of its simulated time in lockstep)."""
+UNREAD_ONBOARD_STREAMS = (
+    "HIGHRES_IMU",
+    "ODOMETRY",
+    "ATTITUDE_QUATERNION",
+    "ATTITUDE_TARGET",
+    "POSITION_TARGET_LOCAL_NED",
+    "POSITION_TARGET_GLOBAL_INT",
+    "SERVO_OUTPUT_RAW_0",
+    "VFR_HUD",
+    "ALTITUDE",
+)
+"""Streams of PX4's onboard mode that no client of ours reads: IMU and odometry at 50 and 30 Hz, the
+quaternion beside ATTITUDE, the controllers' targets, the servo outputs, fixed-wing and altitude data."""
+
+API_LINK_STREAMS_HZ: dict[str, float] = {
+    **{mavlink.mavlink_map[msg_id].msgname: rate for msg_id, rate in DEFAULT_RATES_HZ.items() if rate > 0},
+    **dict.fromkeys(UNREAD_ONBOARD_STREAMS, 0.0),
+}
+"""The API link's streams (PX4 stream name: Hz of PX4's clock; 0 = off): what the sim-vehicle streams, at
+its rates, and none of `UNREAD_ONBOARD_STREAMS`.
+
+PX4's onboard mode sent about 430 messages per simulated second (ATTITUDE alone at 100 Hz), 2,000 a
+wall second at `max`: PX4 packed, the relay forwarded and logged, and MAVSDK parsed each one, on the
+cores the lockstep needs. The state streams are faster than PX4's 1 Hz
+(`drone_inspect_core.state_streams`). Any client may still ask for any stream (SET_MESSAGE_INTERVAL)."""
 
 
 def _mavlink_script(ports: Px4Ports) -> str:
     """PX4's offboard/API link alone (as px4-rc.mavlink starts it), on our ports; no other link; its
-    state streams at `STATE_STREAM_RATES_HZ`."""
+    streams at `API_LINK_STREAMS_HZ`."""
     local, remote = ports.mavlink_udp, ports.mavlink_remote_udp
     lines = [
         "#!/bin/sh",
         _OUR_HOOK.format("px4-rc.mavlink"),
         f"mavlink start -x -u {local} -r 4000000 -f -m onboard -o {remote}",
-        *(f"mavlink stream -r {rate:g} -s {name} -u {local}" for name, rate in STATE_STREAM_RATES_HZ.items()),
+        *(f"mavlink stream -r {rate:g} -s {name} -u {local}" for name, rate in API_LINK_STREAMS_HZ.items()),
     ]
     return "\n".join(lines) + "\n"

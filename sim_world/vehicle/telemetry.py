@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from drone_inspect_core.state_streams import HEARTBEAT_HZ, LANDED_STATE_HZ
 from sim_world.vehicle.model import Kinematics
 from sim_world.vehicle.px4_modes import Px4MainMode, Px4Mode
 
@@ -23,14 +24,10 @@ EARTH_RADIUS_M = 6_378_137.0
 PX4_VERSION = (1, 16, 0)
 
 M = mavlink
-HEARTBEAT_HZ = 10.0
-"""HEARTBEAT's rate on the vehicles this project runs: the sim-vehicle's, and PX4's on the link we start
-it with (`sim_world.px4_bridge.px4_process`; PX4's own default is 1 Hz). A client confirms every mode
-change from the HEARTBEAT, an operator's Hold included: at 1 Hz it showed up to a second late."""
 DEFAULT_RATES_HZ: dict[int, float] = {
     M.MAVLINK_MSG_ID_HEARTBEAT: HEARTBEAT_HZ,
     M.MAVLINK_MSG_ID_SYS_STATUS: 5.0,
-    M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
+    M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: LANDED_STATE_HZ,
     M.MAVLINK_MSG_ID_ATTITUDE: 50.0,
     M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 30.0,
     M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
@@ -40,6 +37,9 @@ DEFAULT_RATES_HZ: dict[int, float] = {
     M.MAVLINK_MSG_ID_DISTANCE_SENSOR: 10.0,  # PX4's rate on its onboard link
     M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: 0.0,  # on request only
 }
+"""What the sim-vehicle streams until a client asks otherwise (SET_MESSAGE_INTERVAL): what MAVSDK reads
+(see the module doc), at PX4's onboard rates or the state rates of `drone_inspect_core.state_streams`.
+PX4's link we start streams the same (`sim_world.px4_bridge.px4_process.API_LINK_STREAMS_HZ`)."""
 RANGEFINDER_MIN_CM, RANGEFINDER_MAX_CM = 10, 1200
 """The forward rangefinder's limits as DISTANCE_SENSOR reports them (`sim_world.physics.rangefinder`)."""
 
