@@ -45,7 +45,7 @@ from mavsdk.plugins.action import Action, ActionError, ActionResult
 from mavsdk.plugins.mavlink_direct import MavlinkDirect, MavlinkDirectError, MavlinkMessage
 from mavsdk.plugins.offboard import Offboard, OffboardError, VelocityBodyYawspeed
 from mavsdk.plugins.telemetry import Telemetry as MavsdkTelemetry
-from mavsdk.plugins.telemetry import TelemetryError
+from mavsdk.plugins.telemetry import TelemetryResult
 from pymavlink.dialects.v20 import common as mavlink
 
 from flight.errors import (
@@ -189,20 +189,23 @@ class MavsdkVehicle(Vehicle):
         log.info("connected to an autopilot on %s (system id %d)", url, system.get_system_id())
 
     def _ask_landed_state_rate(self) -> None:
-        """Ask for EXTENDED_SYS_STATE at `landed_state_rate_hz` (after Action's own request for 1 Hz, which
-        the vehicle then has had first). A vehicle that refuses keeps its rate: said once, not fatal."""
+        """Ask for EXTENDED_SYS_STATE at `landed_state_rate_hz`, without waiting for the answer (queued after
+        Action's own request for 1 Hz, so the vehicle has ours last). A vehicle that refuses keeps its rate:
+        said, not fatal."""
         rate_hz = self.config.landed_state_rate_hz
         if rate_hz is None or self._telemetry is None:
             return
-        try:
-            self._telemetry.set_rate_in_air(rate_hz)
-        except TelemetryError as exc:
-            log.warning(
-                "the vehicle did not take EXTENDED_SYS_STATE at %g Hz (%s): takeoffs and landings are "
-                "confirmed at its own rate",
-                rate_hz,
-                exc.result.name,
-            )
+
+        def answered(result: TelemetryResult, _user_data: Any) -> None:
+            if result != TelemetryResult.SUCCESS:
+                log.warning(
+                    "the vehicle did not take EXTENDED_SYS_STATE at %g Hz (%s): takeoffs and landings are "
+                    "confirmed at its own rate",
+                    rate_hz,
+                    result.name,
+                )
+
+        self._telemetry.set_rate_in_air_async(rate_hz, answered)
 
     def _where(self) -> str:
         """The URL for messages: the user's, and where MAVSDK really listens if that differs."""
