@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import random
 import socket
 import stat
 from pathlib import Path
@@ -20,6 +21,7 @@ from drone_inspect_core.world_options import StartPose, WindConfig
 from sim_world.physics.quadrotor import GRAVITY_M_S2, QuadrotorParams
 from sim_world.px4_bridge.geodesy import HomePoint, magnetic_field_ned_gauss, pressure_hpa, temperature_c
 from sim_world.px4_bridge.instances import px4_instance
+from sim_world.px4_bridge.link import SimulatorServer
 from sim_world.px4_bridge.messages import (
     ACCEL_BITS,
     BARO_BITS,
@@ -28,6 +30,7 @@ from sim_world.px4_bridge.messages import (
     ActuatorCommand,
     HilEncoder,
     RotorMapping,
+    actuator_command,
     px4_airframe_params,
     quaternion_wxyz,
 )
@@ -41,7 +44,7 @@ from sim_world.px4_bridge.px4_process import (
     speed_scaled_timeouts,
 )
 from sim_world.px4_bridge.run import Px4SimConfig
-from sim_world.px4_bridge.sensors import SensorNoise, SensorSuite, Truth
+from sim_world.px4_bridge.sensors import BaroReading, ImuReading, SensorNoise, SensorSuite, Truth
 from sim_world.vehicle.telemetry import DEFAULT_RATES_HZ
 
 ZURICH = HomePoint()
@@ -158,17 +161,41 @@ def test_quaternion_of_a_rotation_matrix() -> None:
     assert [abs(v) for v in quaternion_wxyz(flip)] == pytest.approx([0.0, 1.0, 0.0, 0.0])
 
 
+def _payload(message: mavlink.MAVLink_message) -> bytes:
+    """The payload of `message` as it crosses the link (MAVLink 2: trailing zeros cut)."""
+    frame = message.pack(mavlink.MAVLink(None, srcSystem=1, srcComponent=1))
+    return frame[10:-2]
+
+
 def test_actuator_controls_become_rotor_speeds_only_while_armed() -> None:
     mapping = RotorMapping(max_rad_s=1100.0)
     armed = mavlink.MAVLink_hil_actuator_controls_message(
         5, [0.0, 0.5, 1.0, float("nan")] + [0.0] * 12, mavlink.MAV_MODE_FLAG_SAFETY_ARMED | 1, 1
     )
-    command = ActuatorCommand.from_message(armed)
+    command = actuator_command(_payload(armed))
     assert command.armed and command.lockstep and command.time_usec == 5
     assert mapping.rotor_speeds(command) == pytest.approx([100.0, 600.0, 1100.0, 100.0])  # NaN: idle
     disarmed = mavlink.MAVLink_hil_actuator_controls_message(6, [0.7] * 16, 1, 1)
-    assert mapping.rotor_speeds(ActuatorCommand.from_message(disarmed)) == [0.0] * 4
+    assert mapping.rotor_speeds(actuator_command(_payload(disarmed))) == [0.0] * 4
     assert mapping.rotor_speeds(None) == [0.0] * 4
+    idle = actuator_command(_payload(mavlink.MAVLink_hil_actuator_controls_message(7, [0.0] * 16, 0, 0)))
+    assert idle == ActuatorCommand(7, False, (0.0, 0.0, 0.0, 0.0), False)  # a payload cut to one byte
+
+
+def test_hil_sensor_is_packed_byte_for_byte_as_pymavlink_packs_it() -> None:
+    rng = np.random.default_rng(5)
+    encoder = HilEncoder()
+    for seq in range(300):  # the sequence counter wraps at 256
+        imu = ImuReading(rng.normal(0.0, 5.0, 3), rng.normal(0.0, 1.0, 3))
+        mag = rng.normal(0.0, 0.5, 3) if seq % 2 else None
+        baro = BaroReading(*rng.uniform(0.0, 1000.0, 3)) if seq % 3 else None
+        if seq % 7 == 0:  # all zero but the time: a payload MAVLink 2 cuts short
+            imu = ImuReading(np.zeros(3), np.zeros(3))
+        ours = encoder.hil_sensor(1000 * seq, imu, mag, baro)
+        reference = mavlink.MAVLink(None, srcSystem=1, srcComponent=51)
+        reference.seq = seq % 256
+        decoded = mavlink.MAVLink(None).parse_buffer(ours)[0]
+        assert ours == decoded.pack(reference), seq
 
 
 @pytest.mark.parametrize(
@@ -308,3 +335,38 @@ def test_auto_skips_an_instance_whose_port_another_program_holds_and_a_fixed_one
         taken = f"UDP port {port} \\(a port held by someone else\\)"
         with pytest.raises(PortInUseError, match=taken), px4_instance(lowest, ports):  # type: ignore[arg-type]
             pass
+
+
+def test_the_simulator_link_finds_every_good_frame_among_junk_in_any_chunking() -> None:
+    rng = random.Random(3)
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    sent: list[tuple[int, bytes]] = []
+    stream = b""
+    for i in range(400):
+        message = rng.choice(
+            [
+                mavlink.MAVLink_hil_actuator_controls_message(i, [rng.random()] * 4 + [0.0] * 12, 129, 1),
+                mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 4, 3),
+                mavlink.MAVLink_statustext_message(6, f"text {i}".encode()),
+            ]
+        )
+        frame = message.pack(mav)
+        sent.append((message.get_msgId(), frame[10:-2]))
+        junk = rng.choice([b"", bytes(rng.randrange(256) for _ in range(rng.randrange(1, 40))), b"\xfd\x05"])
+        corrupt = bytearray(frame)
+        corrupt[rng.randrange(10, len(corrupt))] ^= 0xFF  # a frame whose CRC fails: skipped, not its length
+        stream += frame + junk + (bytes(corrupt) if rng.random() < 0.2 else b"")
+    with SimulatorServer("127.0.0.1", 0) as server, socket.create_connection(server.address) as px4:
+        server.accept(5.0)
+        got = []
+        at = 0
+        while at < len(stream):
+            size = rng.randrange(1, 300)
+            px4.sendall(stream[at : at + size])
+            at += size
+            got += server.receive(1.0)
+        while len(got) < len(sent) and (more := server.receive(0.5)):
+            got += more
+    # Junk can hold a frame-like run whose CRC happens to pass only with odds of 1 in 65536 per candidate.
+    assert [(f.msg_id, f.payload) for f in got] == sent
+    assert server.bad_frames > 0

@@ -189,9 +189,9 @@ class MavsdkVehicle(Vehicle):
         log.info("connected to an autopilot on %s (system id %d)", url, system.get_system_id())
 
     def _ask_landed_state_rate(self) -> None:
-        """Ask for EXTENDED_SYS_STATE at `landed_state_rate_hz`, without waiting for the answer (queued after
-        Action's own request for 1 Hz, so the vehicle has ours last). A vehicle that refuses keeps its rate:
-        said, not fatal."""
+        """Ask for EXTENDED_SYS_STATE at `landed_state_rate_hz`, without waiting for the answer; once
+        connected and once ready, as MAVSDK's Action plugin asks for 1 Hz when it starts, and its request
+        may reach the vehicle after ours. A vehicle that refuses keeps its rate: said, not fatal."""
         rate_hz = self.config.landed_state_rate_hz
         if rate_hz is None or self._telemetry is None:
             return
@@ -318,6 +318,7 @@ class MavsdkVehicle(Vehicle):
 
         telemetry = self._wait(ready, timeout_s, "wait_ready()", "local position + home")
         self._ground_down_m = telemetry.position_ned.down_m
+        self._ask_landed_state_rate()  # again: MAVSDK's Action plugin may have asked for 1 Hz after us
 
     def arm(self, timeout_s: float | None = None) -> None:
         timeout_s = timeout_s or self.config.timeouts.arm_s

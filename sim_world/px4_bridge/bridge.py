@@ -34,7 +34,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sim_world.px4_bridge.geodesy import HomePoint
 from sim_world.px4_bridge.link import Px4DisconnectedError, SimulatorServer
-from sim_world.px4_bridge.messages import ActuatorCommand, HilEncoder, RotorMapping
+from sim_world.px4_bridge.messages import ActuatorCommand, HilEncoder, RotorMapping, actuator_command
 from sim_world.px4_bridge.sensors import SensorSuite, Truth
 from sim_world.sitl.frame import AutopilotFrame
 from sim_world.sitl.rig import CameraClock, LockstepPace, TruthReader, continue_in, run_lockstep
@@ -225,13 +225,13 @@ class Px4Bridge:
         while True:
             wait_s = timing.answer_timeout_s if self._stats.lockstep else timing.boot_answer_wait_s
             left = start + wait_s - time.monotonic()
-            for msg in self.server.receive(max(0.0, left)):
+            for frame in self.server.receive(max(0.0, left)):
                 self._last_heard = time.monotonic()
-                name = msg.get_type()
+                name = frame.name
                 counts = self._stats.messages_from_px4
                 counts[name] = counts.get(name, 0) + 1
-                if msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS:
-                    command = ActuatorCommand.from_message(msg)
+                if frame.msg_id == mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS:
+                    command = actuator_command(frame.payload)
                     self._command = command
                     self._stats.answers += 1
                     if not self._stats.lockstep:

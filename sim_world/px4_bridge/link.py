@@ -20,6 +20,7 @@ import logging
 import select
 import socket
 import time
+from typing import NamedTuple
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -27,6 +28,28 @@ from drone_inspect_core.ports import PX4_SIMULATOR_TCP
 from sim_world.sitl.peers import tcp_connection_owned_by
 
 log = logging.getLogger(__name__)
+
+
+_MARKERS = (mavlink.PROTOCOL_MARKER_V2, mavlink.PROTOCOL_MARKER_V1)
+_V2_HEADER_BYTES, _V1_HEADER_BYTES = 10, 6
+_CRC_EXTRA = {msg_id: message.crc_extra for msg_id, message in mavlink.mavlink_map.items()}
+
+
+def _crc(checked: bytes, crc_extra: int) -> int:
+    """MAVLink's CRC (X.25 over the frame after its start marker, then the message's CRC extra)."""
+    return mavlink.x25crc(checked + bytes((crc_extra,))).crc
+
+
+class LinkFrame(NamedTuple):
+    """One whole, CRC-checked frame from PX4: its message id and its payload as sent (MAVLink 2 cuts
+    trailing zeros)."""
+
+    msg_id: int
+    payload: bytes
+
+    @property
+    def name(self) -> str:
+        return mavlink.mavlink_map[self.msg_id].msgname
 
 
 class SimulatorLinkError(OSError):
@@ -116,13 +139,13 @@ class SimulatorServer:
                     )
                 select.select([], [conn], [], left)
 
-    def receive(self, timeout_s: float) -> list[mavlink.MAVLink_message]:
-        """The messages that arrive within `timeout_s` (returns as soon as any arrive)."""
+    def receive(self, timeout_s: float) -> list[LinkFrame]:
+        """The frames that arrive within `timeout_s` (returns as soon as any arrive)."""
         conn = self._require()
         ready, _, _ = select.select([conn], [], [], max(0.0, timeout_s))
         if not ready:
             return []
-        messages: list[mavlink.MAVLink_message] = []
+        frames: list[LinkFrame] = []
         while True:
             try:
                 data = conn.recv(65536)
@@ -133,38 +156,48 @@ class SimulatorServer:
             if not data:
                 raise Px4DisconnectedError("PX4 closed the simulator connection")
             self.bytes_in += len(data)
-            messages += self._frames(data)
+            frames += self._frames(data)
             if len(data) < 65536:
                 break
-        return messages
+        return frames
 
-    def _frames(self, data: bytes) -> list[mavlink.MAVLink_message]:
-        """The whole, known messages in the stream so far. A frame that fails its checks (or has an id we
-        do not know, which cannot be checked) costs one byte, not the frame's claimed length: pymavlink
-        drops as many bytes as a bad header claims, and so, on a byte stream, the good frames that follow;
-        here the scan starts again one byte on."""
-        pending, out = self._pending + data, []
-        while pending:
-            parser = mavlink.MAVLink(None)
-            parser.robust_parsing = True
-            try:
-                message = parser.parse_char(pending)
-            except Exception:  # a parser that chokes: skip the byte it choked on
-                message = mavlink.MAVLink_bad_data(pending[:1], "unparsable")
-                consumed = 1
-            else:
-                consumed = len(pending) - parser.buf_len()
-            if message is None:
-                break  # a frame not yet whole: wait for the rest
-            if isinstance(message, mavlink.MAVLink_unknown | mavlink.MAVLink_bad_data):
-                # (an unknown id cannot be CRC-checked: random bytes pass as one)
+    def _frames(self, data: bytes) -> list[LinkFrame]:
+        """The whole frames of known messages in the stream so far, found by their headers and checked by
+        their CRC (with the message's CRC extra), payloads left undecoded. A candidate that fails (a CRC
+        that does not match, an id we do not know, which cannot be checked) costs one byte, not the frame's
+        claimed length, and bytes before a start marker are skipped: a bad header never swallows the good
+        frames after it. A frame not yet whole waits for the rest."""
+        pending, out, at = self._pending + data, [], 0
+        end_of_data = len(pending)
+        while at < end_of_data:
+            marker = pending[at]
+            if marker not in _MARKERS:
+                following = [i for i in (pending.find(m, at + 1) for m in _MARKERS) if i >= 0]
+                at = min(following, default=end_of_data)
                 self.bad_frames += 1
-                bad_prefix = getattr(message, "reason", "") == "Bad prefix"
-                pending = pending[consumed:] if bad_prefix else pending[1:]
                 continue
-            out.append(message)
-            pending = pending[consumed:]
-        self._pending = pending
+            header = _V2_HEADER_BYTES if marker == mavlink.PROTOCOL_MARKER_V2 else _V1_HEADER_BYTES
+            if end_of_data - at < header:
+                break
+            length = pending[at + 1]
+            if header == _V2_HEADER_BYTES:
+                msg_id = pending[at + 7] | pending[at + 8] << 8 | pending[at + 9] << 16
+                signed = pending[at + 2] & mavlink.MAVLINK_IFLAG_SIGNED
+                signature = mavlink.MAVLINK_SIGNATURE_BLOCK_LEN if signed else 0
+            else:
+                msg_id, signature = pending[at + 5], 0
+            crc_at = at + header + length
+            if crc_at + 2 + signature > end_of_data:
+                break  # not yet whole
+            extra = _CRC_EXTRA.get(msg_id)
+            sent_crc = pending[crc_at] | pending[crc_at + 1] << 8
+            if extra is None or _crc(pending[at + 1 : crc_at], extra) != sent_crc:
+                self.bad_frames += 1
+                at += 1
+                continue
+            out.append(LinkFrame(msg_id, pending[at + header : crc_at]))
+            at = crc_at + 2 + signature
+        self._pending = pending[at:]
         return out
 
     def _require(self) -> socket.socket:

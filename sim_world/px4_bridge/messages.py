@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,15 +42,25 @@ class ActuatorCommand:
     motors: tuple[float, float, float, float]
     lockstep: bool
 
-    @classmethod
-    def from_message(cls, msg: mavlink.MAVLink_hil_actuator_controls_message) -> ActuatorCommand:
-        motors = tuple(_unit(v) for v in msg.controls[:4])
-        return cls(
-            time_usec=int(msg.time_usec),
-            armed=bool(msg.mode & ARMED_FLAG),
-            motors=motors,  # type: ignore[arg-type]
-            lockstep=bool(msg.flags & LOCKSTEP_FLAG),
-        )
+
+_ACTUATORS = mavlink.MAVLink_hil_actuator_controls_message
+_ACTUATOR_PAYLOAD_BYTES = _ACTUATORS.unpacker.size  # time_usec, flags, controls[16], mode (wire order)
+
+
+def actuator_command(payload: bytes) -> ActuatorCommand:
+    """The HIL_ACTUATOR_CONTROLS whose (CRC-checked) MAVLink 2 payload is `payload`, decoded as pymavlink
+    decodes it (trailing zeros, which MAVLink 2 cuts, restored) without building its message object:
+    PX4 sends one for every 4 ms tick of the lockstep."""
+    if len(payload) < _ACTUATOR_PAYLOAD_BYTES:
+        payload = payload + bytes(_ACTUATOR_PAYLOAD_BYTES - len(payload))
+    values = _ACTUATORS.unpacker.unpack_from(payload)
+    time_usec, flags, mode = values[0], values[1], values[18]
+    return ActuatorCommand(
+        time_usec=int(time_usec),
+        armed=bool(mode & ARMED_FLAG),
+        motors=(_unit(values[2]), _unit(values[3]), _unit(values[4]), _unit(values[5])),
+        lockstep=bool(flags & LOCKSTEP_FLAG),
+    )
 
 
 def _unit(value: float) -> float:
@@ -90,15 +101,43 @@ def px4_airframe_params(quad: QuadrotorParams) -> dict[str, float]:
     return {"MPC_THR_HOVER": round(RotorMapping.for_quad(quad).hover_output(quad), 3)}
 
 
+_V2_HEADER = struct.Struct("<BBBBBBBHB")  # magic, length, flags, flags, seq, system, component, id (24 bit)
+_HIL_SENSOR = mavlink.MAVLink_hil_sensor_message
+
+
 class HilEncoder:
-    """Builds the simulator's messages with one MAVLink 2 sequence counter."""
+    """Builds the simulator's messages with one MAVLink 2 sequence counter.
+
+    HIL_SENSOR, sent every 4 ms tick, is packed here byte for byte as pymavlink packs it, without building
+    a message object; the others through pymavlink."""
 
     def __init__(self, system_id: int = 1, component_id: int = 51) -> None:
         self._mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self._mav.robust_parsing = True
+        self._seq = 0
+
+    def _next_seq(self) -> int:
+        seq = self._seq
+        self._seq = (seq + 1) & 0xFF
+        return seq
 
     def pack(self, msg: mavlink.MAVLink_message) -> bytes:
+        self._mav.seq = self._next_seq()
         return msg.pack(self._mav)
+
+    def _frame(self, message: type[mavlink.MAVLink_message], payload: bytes) -> bytes:
+        """`payload` (the fields in wire order) as one unsigned MAVLink 2 frame of `message`'s id."""
+        length = len(payload)
+        while length > 1 and payload[length - 1] == 0:  # MAVLink 2 cuts trailing zeros
+            length -= 1
+        msg_id, mav = message.id, self._mav
+        header = _V2_HEADER.pack(
+            mavlink.PROTOCOL_MARKER_V2, length, 0, 0, self._next_seq(), mav.srcSystem, mav.srcComponent,
+            msg_id & 0xFFFF, msg_id >> 16,
+        )  # fmt: skip
+        frame = header + payload[:length]
+        crc = mavlink.x25crc(frame[1:] + bytes((message.crc_extra,))).crc
+        return frame + struct.pack("<H", crc)
 
     def heartbeat(self) -> bytes:
         return self.pack(
@@ -119,13 +158,12 @@ class HilEncoder:
         if baro is not None:
             fields |= BARO_BITS
             pressure, altitude, temperature = baro.pressure_hpa, baro.pressure_altitude_m, baro.temperature_c
-        ax, ay, az = (float(v) for v in imu.accel_frd_m_s2)
-        gx, gy, gz = (float(v) for v in imu.gyro_frd_rad_s)
-        return self.pack(
-            mavlink.MAVLink_hil_sensor_message(
-                time_usec, ax, ay, az, gx, gy, gz, mx, my, mz, pressure, 0.0, altitude, temperature, fields, 0
-            )
+        ax, ay, az = imu.accel_frd_m_s2.tolist()
+        gx, gy, gz = imu.gyro_frd_rad_s.tolist()
+        payload = _HIL_SENSOR.unpacker.pack(
+            time_usec, ax, ay, az, gx, gy, gz, mx, my, mz, pressure, 0.0, altitude, temperature, fields, 0
         )
+        return self._frame(_HIL_SENSOR, payload)
 
     def hil_gps(self, time_usec: int, gps: GpsReading) -> bytes:
         vn, ve, vd = (float(v) for v in gps.velocity_ned_m_s)
