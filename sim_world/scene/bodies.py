@@ -142,10 +142,14 @@ class BodyBuilder:
         PyBullet draws the collision shapes of a body without a visual shape: TinyRenderer
         would draw this plane as a 256 m checkerboard coplanar with the floor's visual (the
         two z-fight, so which one shows changes from pose to pose) at ~20% of a 224 px
-        frame's cost. Fully transparent shapes are skipped by the renderer.
+        frame's cost. Fully transparent shapes are skipped by the renderer. The body gets a
+        visual of its own (a transparent millimetre box): without one PyBullet builds that
+        checkerboard's texture (megabytes, byte by byte) every time a world is built, which
+        was most of a warm reset's time in a bridge's world.
         """
         cid = self.client_id
         shape = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid)
-        body = p.createMultiBody(0.0, shape, -1, (0.0, 0.0, 0.0), physicsClientId=cid)
-        p.changeVisualShape(body, -1, rgbaColor=(1.0, 1.0, 1.0, 0.0), physicsClientId=cid)
-        return body
+        unseen = p.createVisualShape(
+            p.GEOM_BOX, halfExtents=(0.001, 0.001, 0.001), rgbaColor=(1.0, 1.0, 1.0, 0.0), physicsClientId=cid
+        )
+        return p.createMultiBody(0.0, shape, unseen, (0.0, 0.0, 0.0), physicsClientId=cid)
