@@ -8,7 +8,9 @@ the vehicle's address), it can:
   logs, so every MAVLink flight's log is written here. The format is the one
   QGroundControl, Mission Planner and pymavlink's `mavutil.mavlink_connection("x.tlog")`
   read: each message preceded by its time as a big-endian uint64 of microseconds since
-  the Unix epoch. What is logged is what crossed (after any injected fault);
+  the Unix epoch. What is logged is what crossed (after any injected fault): every whole frame
+  of a message ArduPilot's dialect knows (it holds every common one), found by its header and
+  CRC (`drone_inspect_core.mavlink_frames`), as the bytes that crossed;
 - inject a **bad link** (`faults`, `flight.link_faults`): loss, latency, jitter,
   duplication and reordering, both ways;
 - **meter** what reaches the vehicle (`message_times_s`: setpoints per second as the
@@ -56,6 +58,7 @@ from typing import BinaryIO
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from drone_inspect_core import mavlink_frames
 from drone_inspect_core.files import still_there
 from drone_inspect_core.ports import free_port
 from drone_inspect_core.signing import FrameSigner, FrameVerifier, SigningKey
@@ -69,6 +72,7 @@ SET_POSITION_TARGET_LOCAL_NED = 84
 INCOMPLETE_SUFFIX = ".incomplete.tlog"
 """What a .tlog whose recording stopped early is renamed to end with (`flight.incomplete.tlog`)."""
 _MAX_DATAGRAM = 65535
+_DRAIN_MAX = 64  # datagrams read from one side per wakeup
 _POLL_S = 0.05
 _FILE_CHECK_S = 1.0  # how often the .tlog is checked to still be where it was written
 
@@ -218,11 +222,16 @@ class MavlinkRelay:
             selector.close()
 
     def _receive(self, side: str) -> None:
+        """The datagrams waiting on `side`'s socket, up to `_DRAIN_MAX` (a burst costs one wakeup)."""
         sock = self._vehicle_sock if side == "vehicle" else self._client_sock
-        try:
-            data, address = sock.recvfrom(_MAX_DATAGRAM)
-        except OSError:  # an ICMP error from an earlier send, or a socket being closed
-            return
+        for _ in range(_DRAIN_MAX):
+            try:
+                data, address = sock.recvfrom(_MAX_DATAGRAM, socket.MSG_DONTWAIT)
+            except OSError:  # none left, an ICMP error from an earlier send, or a socket being closed
+                return
+            self._relay(side, data, address)
+
+    def _relay(self, side: str, data: bytes, address: tuple[str, int]) -> None:
         if side == "vehicle" and self.vehicle_address is not None and address != self.vehicle_address:
             self._stranger(address)
             return
@@ -305,23 +314,23 @@ class MavlinkRelay:
                     exc,
                 )
             return
-        if side == "vehicle":
-            messages = parse_datagram(data) if self._file is not None else []
-        else:
-            messages = parse_datagram(data)
+        if side == "vehicle" and self._file is None:
+            return
+        frames = mavlink_frames.scan(data, more_to_come=False)[0]  # whole, CRC-checked, of known messages
+        if side == "client":
             now = time.monotonic()
             with self._lock:
-                for message in messages:
-                    msg_id = message.get_msgId()
-                    self.uplink_counts[msg_id] += 1
-                    self._uplink_times.setdefault(msg_id, []).append(now)
-        if self._file is not None and messages:
+                for frame in frames:
+                    self.uplink_counts[frame.msg_id] += 1
+                    self._uplink_times.setdefault(frame.msg_id, []).append(now)
+        if self._file is not None and frames:
             with self._file_lock:
                 if self._file is not None:
-                    self._record(messages)
+                    self._record([data[f.start : f.end] for f in frames])
 
-    def _record(self, messages: list[mavlink.MAVLink_message]) -> None:
-        """Append `messages` to the .tlog; on a failed write, stop recording (once) and keep relaying."""
+    def _record(self, frames: list[bytes]) -> None:
+        """Append `frames` (one datagram's) to the .tlog in one write; on a failed write, stop recording
+        (once) and keep relaying."""
         assert self._file is not None
         now = time.monotonic()
         if now >= self._next_check_s and self.path is not None:  # a removed folder gives no write error
@@ -330,15 +339,23 @@ class MavlinkRelay:
                 self._stop_recording(OSError(errno.ENOENT, "the file or its folder was removed"))
                 return
         stamp = struct.pack(">Q", int(time.time() * 1e6))
+        records = [stamp + frame for frame in frames]
+        block = b"".join(records)
         try:
-            for message in messages:
-                record = stamp + bytes(message.get_msgbuf())
-                written = self._file.write(record)
-                if written != len(record):
-                    short = f"{os.strerror(errno.ENOSPC)} ({written} of {len(record)} bytes written)"
-                    raise OSError(errno.ENOSPC, short)
-                self._logged_bytes += len(record)
-                self.messages_logged += 1
+            written = self._file.write(block)
+            if written != len(block):
+                whole = 0  # the records that made it whole stay; `_stop_recording` cuts the rest
+                for record in records:
+                    if written < len(record):
+                        break
+                    written -= len(record)
+                    self._logged_bytes += len(record)
+                    self.messages_logged += 1
+                    whole += 1
+                short = f"{os.strerror(errno.ENOSPC)} ({whole} of {len(records)} messages written whole)"
+                raise OSError(errno.ENOSPC, short)
+            self._logged_bytes += len(block)
+            self.messages_logged += len(records)
         except OSError as exc:
             self._stop_recording(exc)
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega
 from pymavlink.dialects.v20 import common as mavlink
 
 from flight.relay import MavlinkRelay
@@ -56,6 +57,40 @@ def test_relays_both_ways_and_writes_a_readable_tlog(tmp_path: Path) -> None:
             assert abs(message.pitch + 0.2) < 1e-6
         assert abs(message._timestamp - time.time()) < 60  # the tlog's own time stamps
     assert types == ["HEARTBEAT", "ATTITUDE", "COMMAND_LONG"]
+
+
+def test_the_tlog_holds_each_good_frame_as_it_crossed_and_no_junk(tmp_path: Path) -> None:
+    path = tmp_path / "flight.tlog"
+    mav = ardupilotmega.MAVLink(None, srcSystem=1, srcComponent=1)
+    heartbeat = mav.heartbeat_encode(
+        mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, mavlink.MAV_STATE_STANDBY
+    ).pack(mav)
+    attitude = mav.attitude_encode(1000, 0.1, -0.2, 0.3, 0.0, 0.0, 0.0).pack(mav)
+    ekf = mav.ekf_status_report_encode(7, 0.1, 0.2, 0.3, 0.4, 0.5).pack(mav)  # ArduPilot's own message
+    broken = bytearray(attitude)
+    broken[-1] ^= 0xFF  # its CRC no longer matches: not logged, and it does not hide what follows
+    datagrams = [heartbeat, attitude + b"\xfd\x40junk" + ekf, bytes(broken) + attitude, b"\x00" * 40]
+    vehicle, client = _udp(), _udp()
+    with MavlinkRelay(0, client.getsockname()[1], path) as proxy:
+        for datagram in datagrams:
+            vehicle.sendto(datagram, proxy.listen_address)
+            assert client.recv(65535) == datagram  # forwarded unchanged, junk and all
+        deadline = time.monotonic() + 2.0
+        while proxy.messages_logged < 4 and time.monotonic() < deadline:
+            time.sleep(0.01)
+    vehicle.close()
+    client.close()
+    raw = path.read_bytes()
+    frames = [heartbeat, attitude, ekf, attitude]
+    assert len(raw) == sum(8 + len(f) for f in frames)  # each frame after its 8-byte time stamp, nothing else
+    at = 0
+    for frame in frames:
+        assert raw[at + 8 : at + 8 + len(frame)] == frame
+        at += 8 + len(frame)
+    log = mavutil.mavlink_connection(str(path), dialect="ardupilotmega")
+    assert [m.get_type() for m in iter(log.recv_match, None)] == [
+        "HEARTBEAT", "ATTITUDE", "EKF_STATUS_REPORT", "ATTITUDE"
+    ]  # fmt: skip
 
 
 def test_a_taken_port_is_named(tmp_path: Path) -> None:

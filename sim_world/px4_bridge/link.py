@@ -22,22 +22,11 @@ import socket
 import time
 from typing import NamedTuple
 
-from pymavlink.dialects.v20 import common as mavlink
-
+from drone_inspect_core import mavlink_frames
 from drone_inspect_core.ports import PX4_SIMULATOR_TCP
 from sim_world.sitl.peers import tcp_connection_owned_by
 
 log = logging.getLogger(__name__)
-
-
-_MARKERS = (mavlink.PROTOCOL_MARKER_V2, mavlink.PROTOCOL_MARKER_V1)
-_V2_HEADER_BYTES, _V1_HEADER_BYTES = 10, 6
-_CRC_EXTRA = {msg_id: message.crc_extra for msg_id, message in mavlink.mavlink_map.items()}
-
-
-def _crc(checked: bytes, crc_extra: int) -> int:
-    """MAVLink's CRC (X.25 over the frame after its start marker, then the message's CRC extra)."""
-    return mavlink.x25crc(checked + bytes((crc_extra,))).crc
 
 
 class LinkFrame(NamedTuple):
@@ -49,7 +38,7 @@ class LinkFrame(NamedTuple):
 
     @property
     def name(self) -> str:
-        return mavlink.mavlink_map[self.msg_id].msgname
+        return mavlink_frames.name_of(self.msg_id)
 
 
 class SimulatorLinkError(OSError):
@@ -162,43 +151,13 @@ class SimulatorServer:
         return frames
 
     def _frames(self, data: bytes) -> list[LinkFrame]:
-        """The whole frames of known messages in the stream so far, found by their headers and checked by
-        their CRC (with the message's CRC extra), payloads left undecoded. A candidate that fails (a CRC
-        that does not match, an id we do not know, which cannot be checked) costs one byte, not the frame's
-        claimed length, and bytes before a start marker are skipped: a bad header never swallows the good
-        frames after it. A frame not yet whole waits for the rest."""
-        pending, out, at = self._pending + data, [], 0
-        end_of_data = len(pending)
-        while at < end_of_data:
-            marker = pending[at]
-            if marker not in _MARKERS:
-                following = [i for i in (pending.find(m, at + 1) for m in _MARKERS) if i >= 0]
-                at = min(following, default=end_of_data)
-                self.bad_frames += 1
-                continue
-            header = _V2_HEADER_BYTES if marker == mavlink.PROTOCOL_MARKER_V2 else _V1_HEADER_BYTES
-            if end_of_data - at < header:
-                break
-            length = pending[at + 1]
-            if header == _V2_HEADER_BYTES:
-                msg_id = pending[at + 7] | pending[at + 8] << 8 | pending[at + 9] << 16
-                signed = pending[at + 2] & mavlink.MAVLINK_IFLAG_SIGNED
-                signature = mavlink.MAVLINK_SIGNATURE_BLOCK_LEN if signed else 0
-            else:
-                msg_id, signature = pending[at + 5], 0
-            crc_at = at + header + length
-            if crc_at + 2 + signature > end_of_data:
-                break  # not yet whole
-            extra = _CRC_EXTRA.get(msg_id)
-            sent_crc = pending[crc_at] | pending[crc_at + 1] << 8
-            if extra is None or _crc(pending[at + 1 : crc_at], extra) != sent_crc:
-                self.bad_frames += 1
-                at += 1
-                continue
-            out.append(LinkFrame(msg_id, pending[at + header : crc_at]))
-            at = crc_at + 2 + signature
-        self._pending = pending[at:]
-        return out
+        """The whole frames of known messages in the stream so far (`drone_inspect_core.mavlink_frames`:
+        a bad header never swallows the good frames after it); a frame not yet whole waits for the rest."""
+        pending = self._pending + data
+        frames, used, bad = mavlink_frames.scan(pending)
+        self.bad_frames += bad
+        self._pending = pending[used:]
+        return [LinkFrame(f.msg_id, pending[f.payload_start : f.payload_end]) for f in frames]
 
     def _require(self) -> socket.socket:
         if self._conn is None:
