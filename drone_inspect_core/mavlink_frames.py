@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-MARKERS = (mavlink.PROTOCOL_MARKER_V2, mavlink.PROTOCOL_MARKER_V1)
+_MARKERS = (mavlink.PROTOCOL_MARKER_V2, mavlink.PROTOCOL_MARKER_V1)
 _V2_HEADER_BYTES, _V1_HEADER_BYTES = 10, 6
 _CRC_EXTRA = {msg_id: message.crc_extra for msg_id, message in mavlink.mavlink_map.items()}
 
@@ -55,8 +55,8 @@ def scan(data: bytes, more_to_come: bool = True) -> tuple[list[MavlinkFrame], in
     at, bad, size = 0, 0, len(data)
     while at < size:
         marker = data[at]
-        if marker not in MARKERS:
-            following = [i for i in (data.find(m, at + 1) for m in MARKERS) if i >= 0]
+        if marker not in _MARKERS:
+            following = [i for i in (data.find(m, at + 1) for m in _MARKERS) if i >= 0]
             at = min(following, default=size)
             bad += 1
             continue

@@ -1,12 +1,13 @@
 """How often the vehicles this project runs say their state, and how often its clients ask for it.
 
 A client confirms every arming and mode change (an operator's Hold included) from the HEARTBEAT and
-every takeoff and landing from the landed state in EXTENDED_SYS_STATE. PX4 and ArduPilot send both at
-1 Hz by default, and MAVSDK's Action plugin asks for EXTENDED_SYS_STATE at 1 Hz when it starts: at
+every takeoff and landing from the landed state in EXTENDED_SYS_STATE. PX4 sends both at 1 Hz by
+default, and MAVSDK's Action plugin asks for EXTENDED_SYS_STATE at 1 Hz when it starts: at
 1 Hz of a vehicle's clock each confirmation came up to a (simulated) second late, four or five times a
 mission. The sim-vehicle streams both at these rates, PX4 is started with them on the link we give it
 (`sim_world.px4_bridge.px4_process`), and the MAVSDK backend asks any vehicle for the landed state at
-`LANDED_STATE_HZ` once connected (`flight.mavsdk.vehicle`): a few bytes a second more on a radio.
+`LANDED_STATE_HZ` once connected and once ready (`flight.mavsdk.vehicle`): a few bytes a second more
+on a radio.
 """
 
 from __future__ import annotations

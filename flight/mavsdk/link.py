@@ -78,9 +78,10 @@ class MavsdkConfig:
     time sees at 20/k Hz (PX4 wants more than 2 Hz), and a lockstepped sim-vehicle advances only as
     setpoints arrive: a stream on its own clock keeps both as at ×1."""
     landed_state_rate_hz: float | None = LANDED_STATE_HZ
-    """Asked of the vehicle once connected (EXTENDED_SYS_STATE, SET_MESSAGE_INTERVAL): MAVSDK's Action
-    plugin asks for 1 Hz when it starts, overriding the rate the vehicle was started with, and every
-    takeoff and landing is confirmed from it (`drone_inspect_core.state_streams`). None: not asked."""
+    """Asked of the vehicle once connected and once ready (EXTENDED_SYS_STATE, SET_MESSAGE_INTERVAL):
+    MAVSDK's Action plugin asks for 1 Hz when it starts, overriding the rate the vehicle was started with,
+    and every takeoff and landing is confirmed from it (`drone_inspect_core.state_streams`). None: not
+    asked."""
     parameter_save_guard_s: float = PX4_PARAMETER_SAVE_GUARD_S
     """Seconds (of `clock`) after the vehicle last armed or disarmed before `prepare_takeoff` sets a
     parameter: PX4 saves its parameters after either (see `PX4_PARAMETER_SAVE_GUARD_S`). 0: a vehicle that

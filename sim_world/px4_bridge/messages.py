@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from drone_inspect_core import mavlink_frames
 from sim_world.physics.quadrotor import GRAVITY_M_S2, QuadrotorParams
 from sim_world.px4_bridge.sensors import BaroReading, GpsReading, ImuReading, Truth
 from sim_world.sitl.rig import quaternion_wxyz
@@ -136,8 +137,7 @@ class HilEncoder:
             msg_id & 0xFFFF, msg_id >> 16,
         )  # fmt: skip
         frame = header + payload[:length]
-        crc = mavlink.x25crc(frame[1:] + bytes((message.crc_extra,))).crc
-        return frame + struct.pack("<H", crc)
+        return frame + struct.pack("<H", mavlink_frames.crc(frame[1:], message.crc_extra))
 
     def heartbeat(self) -> bytes:
         return self.pack(
