@@ -126,7 +126,11 @@ def test_a_kept_relay_records_each_mission_in_its_own_tlog(tmp_path: Path) -> No
 def test_a_warm_sim_vehicle_starts_every_seed_where_a_fresh_one_does(tmp_path: Path) -> None:
     # At max speed a flight's timing on this machine varies from run to run (a fresh vehicle's too: a
     # step more or less, final offsets a few px apart), so the flights are compared where that timing
-    # has not yet acted: the first picture, taken at the start pose after the takeoff, and the outcome.
+    # has least acted: the first picture, taken at the start pose after the takeoff, and the outcome.
+    # That picture still follows the hover the takeoff ends in: warm against fresh, the largest
+    # difference was 2.0-2.6 px in six pairs beside two busy loops and 3.3 px once in a full suite run;
+    # a world or start that differed would put it tens of pixels off (the exact comparison of a reset
+    # world with a fresh one is `test_a_reset_sim_vehicle_shows_the_world_a_fresh_one_builds`).
     config = BenchmarkConfig.of(
         {"vehicle": "sim-mavlink", "sim_speed": "max"}, n=2, seed=4, planners=("latent",)
     )
@@ -144,7 +148,7 @@ def test_a_warm_sim_vehicle_starts_every_seed_where_a_fresh_one_does(tmp_path: P
         assert warm["passed"] and fresh["passed"], name
         first_warm = warm["instructions"][0]["records"][0]["truth_offset_px"]
         first_fresh = fresh["instructions"][0]["records"][0]["truth_offset_px"]
-        assert np.abs(np.subtract(first_warm, first_fresh)).max() < 3.0, (name, first_warm, first_fresh)
+        assert np.abs(np.subtract(first_warm, first_fresh)).max() < 5.0, (name, first_warm, first_fresh)
     second = list(reports[True].values())[1]
     assert second["phases_wall_s"]["ready"] < 0.5  # a warm autopilot has booted: ready at once
 
