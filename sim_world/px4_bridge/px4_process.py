@@ -35,8 +35,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pymavlink.dialects.v20 import common as mavlink
-
+from drone_inspect_core.mavlink_frames import name_of
 from sim_world.sitl.children import SitlChild, find_sitl_dir
 from sim_world.vehicle.telemetry import DEFAULT_RATES_HZ
 
@@ -253,7 +252,7 @@ UNREAD_ONBOARD_STREAMS = (
 quaternion beside ATTITUDE, the controllers' targets, the servo outputs, fixed-wing and altitude data."""
 
 API_LINK_STREAMS_HZ: dict[str, float] = {
-    **{mavlink.mavlink_map[msg_id].msgname: rate for msg_id, rate in DEFAULT_RATES_HZ.items() if rate > 0},
+    **{name_of(msg_id): rate for msg_id, rate in DEFAULT_RATES_HZ.items() if rate > 0},
     **dict.fromkeys(UNREAD_ONBOARD_STREAMS, 0.0),
 }
 """The API link's streams (PX4 stream name: Hz of PX4's clock; 0 = off): what the sim-vehicle streams, at

@@ -56,8 +56,8 @@ PX4_QUAD = SITL_QUAD
 """The project's quadrotor with compliant landing legs (3 mm static deflection, damped)."""
 PHYSICS_HZ = 250.0
 """One physics step per 4 ms sensor tick, as PX4's Gazebo worlds step (`max_step_size` 0.004). Two steps
-a tick (500 Hz) flew the same missions (takeoff, loop and landing took the same simulated time) at
-about a tenth more of the machine's CPU."""
+a tick (500 Hz) flew the same missions (takeoff, loop and landing took the same simulated time), and the
+missions benchmark's PX4 way took 28.3-29.7 s then against 26.4-26.7 s (docs/performance.md)."""
 MAGNETIC_MODEL_YEAR = 2025.5
 MAX_SPEED_FACTOR = 10.0
 """For PX4's timeouts, `--speed max` counts as 10× real time (measured here: 2.7× with the 224 px
