@@ -10,10 +10,16 @@ collected dataset instead.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
+
+if TYPE_CHECKING:
+    from controller.planning.latent.config import ModelConfig
+    from controller.training.config import TrainConfig
 
 KINDS = ("gauge", "valve", "switchbox")
 ATTRIBUTES = {"gauge": "black", "valve": "red", "switchbox": "grey"}
@@ -153,3 +159,20 @@ def write_synthetic_dataset(
     (root / "dataset.json").write_text(json.dumps(meta, indent=1))
     (root / "manifest.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
     return root
+
+
+def small_grounded(epochs: int) -> tuple[ModelConfig, TrainConfig]:
+    """The grounded preset at this fixture's scale: 64 px, width 8, one thread, lr 2e-3, `epochs`.
+
+    Channels-last order and the light and paint jitter are off: on this small fixture whether the words
+    are learned in 30 epochs depends on the run's exact trajectory (other seeds, the same seed summed in
+    channels-last order, or other augmentation draws can stay near chance for one of the targets); this
+    one is known to learn them, and a broken grounding still fails it."""
+    from controller.training.config import PRESETS
+
+    preset = PRESETS["grounded"]
+    no_light = replace(preset.train.augment, relight=0.0, gamma=0.0, tint=0.0)
+    train = replace(
+        preset.train, epochs=epochs, learning_rate=2e-3, threads=1, channels_last=False, augment=no_light
+    )
+    return replace(preset.model, image_size=64, base_width=8), train

@@ -122,8 +122,13 @@ def test_grounded_reproduction_trains_each_seed_once_and_reports(tmp_path: Path)
     assert json.loads((out / "grounded.json").read_text())["seeds"][1]["tests"]["two"]["n"] == 24
 
 
-def test_a_recipe_override_is_refused_outside_the_grounded_experiment(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    "option", [["--shift-init-std", "0.5"], ["--distill-from", "teacher"], ["--distill-weight", "2"]]
+)
+def test_a_recipe_override_is_refused_outside_the_grounded_experiment(
+    tmp_path: Path, option: list[str]
+) -> None:
     from dronectl.reproduce_cmd import main
 
-    with pytest.raises(SystemExit, match="--shift-init-std is for --experiments grounded"):
-        main(["--data", str(tmp_path), "--out", str(tmp_path / "out"), "--shift-init-std", "0.5"])
+    with pytest.raises(SystemExit, match=f"{option[0]}: for --experiments grounded only"):
+        main(["--data", str(tmp_path), "--out", str(tmp_path / "out"), *option])

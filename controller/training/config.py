@@ -177,8 +177,17 @@ class TrainConfig:
     # at ln 9 until the shifts drift apart, longer for some seeds than others. 0.5 ends it sooner, but
     # its three seeds of the grounded recipe did worse on the held-out look (docs/targets.md).
     shift_init_std: float = SHIFT_INIT_STD
+    # Distillation (`controller.training.distill`): a finished planner checkpoint whose scores of every
+    # training batch the student also learns, weighted by `distill_weight`; None = off. For the
+    # `described` target choice (the grounded preset).
+    distill_from: str | None = None
+    distill_weight: float = 1.0
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.distill_weight) and self.distill_weight >= 0):
+            raise ValueError(f"distill_weight must be >= 0, got {self.distill_weight}")
+        if self.distill_from is not None and self.target_choice != "described":
+            raise ValueError("distill_from needs target_choice 'described' (the grounded preset)")
         if not (math.isfinite(self.shift_init_std) and self.shift_init_std > 0):
             raise ValueError(f"shift_init_std must be > 0, got {self.shift_init_std}")
         if not 0.0 <= self.ema_decay < 1.0:

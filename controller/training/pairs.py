@@ -42,6 +42,9 @@ class SampledPairs:
     """(B, 2) pixel offset of the asked-for target (zeros for absent samples)."""
     present: torch.Tensor
     """(B,) bool: the asked-for target is in view."""
+    teacher_ids: torch.Tensor | None = None
+    """(B, L') the same instructions in a distillation teacher's tokens (`controller.training.distill`);
+    None without a teacher."""
 
 
 def target_name_for(target: TargetRef, visible: Sequence[TargetRef], with_colour: bool) -> TargetQuery:
@@ -81,7 +84,9 @@ class DescriptionSampler:
         absent_fraction: float,
         named_fraction: float = NAMED_FRACTION,
         vocabulary: Vocabulary | None = None,
+        teacher_tokenizer: InstructionTokenizer | None = None,
     ) -> None:
+        """`teacher_tokenizer`: a distillation teacher's, which spells every sample's instruction too."""
         self.vocabulary = vocabulary
         self.templates = list(templates)
         self.corpus = corpus
@@ -91,6 +96,7 @@ class DescriptionSampler:
         keys, texts = [key for key, _ in table], [text for _, text in table]
         self.row_of = {key: i for i, key in enumerate(keys)}
         self.ids = tokenizer.batch(texts)  # (K, L)
+        self.teacher_ids = None if teacher_tokenizer is None else teacher_tokenizer.batch(texts)
 
     def _ids_row(self, name: TargetQuery, rng: np.random.Generator) -> int:
         n_syn = len(synonyms(name.kind, self.corpus, self.vocabulary))
@@ -128,8 +134,9 @@ class DescriptionSampler:
             self._trimmed(rows),
             torch.tensor(offsets, dtype=torch.float32),
             torch.tensor(present, dtype=torch.bool),
+            None if self.teacher_ids is None else self._trimmed(rows, self.teacher_ids),
         )
 
-    def _trimmed(self, rows: list[int]) -> torch.Tensor:
-        ids = self.ids[torch.tensor(rows, dtype=torch.long)]
+    def _trimmed(self, rows: list[int], table: torch.Tensor | None = None) -> torch.Tensor:
+        ids = (self.ids if table is None else table)[torch.tensor(rows, dtype=torch.long)]
         return ids[:, : int(ids.ne(0).sum(dim=1).max())]

@@ -45,6 +45,7 @@ from controller.training.data import (
     split_train_val,
     to_float,
 )
+from controller.training.distill import Teacher
 from controller.training.finetune import TrainingWords, check_start, start_from, training_words
 from controller.training.instructions import builtin_templates, fill, tokenizer_corpus
 from controller.training.losses import LossTerms
@@ -131,11 +132,16 @@ def train(
     # A bad starting checkpoint, dataset or kind is said before the run folder exists.
     if init_dir is not None:
         model_cfg = check_start(init_dir)
+    teacher = (
+        None
+        if cfg.distill_from is None
+        else Teacher.load(Path(cfg.distill_from), model_cfg.image_size, dev, cfg.channels_last)
+    )
     index = _merged_index(data_dirs)
     words = training_words(data_dirs, init_dir)
     # The run folder must be new or empty, and a run that fails before writing leaves none behind.
     with claimed_dir(out_dir, "run folder") as claimed:
-        return _fit(index, data_dirs[0], claimed, model_cfg, cfg, progress, dev, words, init_dir)
+        return _fit(index, data_dirs[0], claimed, model_cfg, cfg, progress, dev, words, init_dir, teacher)
 
 
 def _fit(
@@ -148,6 +154,7 @@ def _fit(
     dev: torch.device,
     words: TrainingWords,
     init_dir: Path | None,
+    teacher: Teacher | None = None,
 ) -> TrainResult:
     """`train` once the data is indexed and the run folder claimed."""
     torch.set_num_threads(cfg.threads)
@@ -197,7 +204,13 @@ def _fit(
     sampler: _InstructionSampler | DescriptionSampler
     if described:
         sampler = DescriptionSampler(
-            tokenizer, templates, corpus, cfg.absent_fraction, cfg.named_fraction, vocabulary
+            tokenizer,
+            templates,
+            corpus,
+            cfg.absent_fraction,
+            cfg.named_fraction,
+            vocabulary,
+            None if teacher is None else teacher.tokenizer,
         )
         val_instructions = pair_described(val_set.targets, templates, corpus, cfg.seed, vocabulary)
         goal_ids = _goal_ids(tokenizer, goals, corpus, vocabulary)
@@ -246,7 +259,7 @@ def _fit(
             g_idx = torch.randint(len(goals), (cfg.goal_sample,), generator=gen)
             if isinstance(sampler, DescriptionSampler):
                 terms, d_all, labels = _step_described(
-                    model, cfg, train_set, goals, idx, g_idx, sampler, size_px, eps, gen, rng
+                    model, cfg, train_set, goals, idx, g_idx, sampler, size_px, eps, gen, rng, teacher
                 )
             else:
                 terms, d_all, labels = _step(

@@ -22,6 +22,7 @@ from controller.planning.latent.tokenizer import InstructionTokenizer
 from controller.training.augment import augment, label_exact, labels_of
 from controller.training.config import TrainConfig
 from controller.training.data import ImageSet, to_float
+from controller.training.distill import Teacher, presence_distillation, ranking_distillation
 from controller.training.instructions import builtin_templates
 from controller.training.losses import LossTerms, total_loss
 from controller.training.pairs import DescriptionSampler, named_target_name
@@ -82,8 +83,12 @@ def step_described(
     eps: float,
     gen: torch.Generator,
     rng: np.random.Generator,
+    teacher: Teacher | None = None,
 ) -> tuple[LossTerms, torch.Tensor, torch.Tensor]:
-    """Forward one batch; return its loss terms, the present samples' (P, 9) distances and labels."""
+    """Forward one batch; return its loss terms, the present samples' (P, 9) distances and labels.
+
+    With a `teacher` the total also holds `cfg.distill_weight` times the distillation terms
+    (`controller.training.distill`); the sampler must then spell the teacher's tokens too."""
     b = len(idx)
     pairs = sampler.sample([data.targets[i] for i in idx.tolist()], rng)
     batch = augment(to_float(data.images[idx]), pairs.offsets_px, size_px, eps, cfg.augment, gen)
@@ -112,7 +117,16 @@ def step_described(
     keep = present.nonzero().squeeze(1)
     labels = labels.to(x.device)[keep]
     terms, d_all = ranking_terms(model, cfg, z_s[keep], z_goal[keep], labels)
-    if model.presence is not None and cfg.presence_weight > 0:
-        presence = F.binary_cross_entropy_with_logits(model.presence_logits(z_s), present.float())
+    logits = model.presence_logits(z_s) if model.presence is not None else None
+    if logits is not None and cfg.presence_weight > 0:
+        presence = F.binary_cross_entropy_with_logits(logits, present.float())
         terms = replace(terms, total=terms.total + cfg.presence_weight * presence)
+    if teacher is not None:
+        if pairs.teacher_ids is None:
+            raise ValueError("distillation: the sampler was made without the teacher's tokenizer")
+        d_teacher, logits_teacher = teacher.scores(x[:b], pairs.teacher_ids)
+        taught = ranking_distillation(d_all, d_teacher[keep], cfg.temperature)
+        if logits is not None and logits_teacher is not None:
+            taught = taught + cfg.presence_weight * presence_distillation(logits, logits_teacher)
+        terms = replace(terms, total=terms.total + cfg.distill_weight * taught)
     return terms, d_all, labels

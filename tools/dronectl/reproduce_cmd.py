@@ -50,6 +50,16 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="grounded: override the preset's spread of g_X, g_Z at initialisation (a recipe under test)",
     )
+    p.add_argument(
+        "--distill-from",
+        type=Path,
+        default=None,
+        metavar="CHECKPOINT",
+        help="grounded: every seed also learns this planner checkpoint's scores (distillation)",
+    )
+    p.add_argument(
+        "--distill-weight", type=float, default=None, help="grounded: weight of the distillation terms"
+    )
     return p
 
 
@@ -63,8 +73,20 @@ def main(argv: list[str]) -> int:
         )
     if args.experiments == "grounded" and not (args.test or args.heldout_look):
         raise SystemExit("dronectl reproduce: --experiments grounded needs --test and/or --heldout-look")
-    if args.shift_init_std is not None and args.experiments != "grounded":
-        raise SystemExit("dronectl reproduce: --shift-init-std is for --experiments grounded")
+    recipe = {
+        key: value
+        for key, value in (
+            ("shift_init_std", args.shift_init_std),
+            ("distill_from", None if args.distill_from is None else str(args.distill_from)),
+            ("distill_weight", args.distill_weight),
+        )
+        if value is not None
+    }
+    if recipe and args.experiments != "grounded":
+        raise SystemExit(
+            f"dronectl reproduce: {', '.join('--' + k.replace('_', '-') for k in recipe)}: "
+            "for --experiments grounded only"
+        )
     if args.threads < 1:
         raise SystemExit(f"dronectl reproduce: --threads must be >= 1, got {args.threads}")
     from drone_inspect_core.dataset import load_manifest
@@ -87,9 +109,7 @@ def main(argv: list[str]) -> int:
                 epochs=args.epochs,
                 total_threads=args.threads,
                 ray=args.ray,
-                train_overrides={}
-                if args.shift_init_std is None
-                else {"shift_init_std": args.shift_init_std},
+                train_overrides=recipe,
             )
             print(f"report: {path}")
             return 0
