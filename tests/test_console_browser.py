@@ -29,8 +29,6 @@ SHOTS = os.environ.get("DRONECTL_CONSOLE_SCREENSHOTS")
 pytestmark = pytest.mark.skipif(chromium_missing() is not None, reason=str(chromium_missing()))
 
 
-
-
 def _shot(page: Any, name: str) -> None:
     if SHOTS:
         Path(SHOTS).mkdir(parents=True, exist_ok=True)

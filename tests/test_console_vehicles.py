@@ -29,8 +29,6 @@ REPO = Path(__file__).resolve().parents[1]
 MISSION = REPO / "missions" / "regression" / "three_targets.yaml"
 
 
-
-
 def _children(pid: int) -> list[int]:
     found = []
     for status in Path("/proc").glob("[0-9]*/status"):
@@ -109,7 +107,9 @@ def test_the_console_opens_on_ardupilot_sitl(tmp_path: Path) -> None:
         with connect(console.url.replace("http://", "ws://") + "ws", open_timeout=10) as ws:
             seen: dict[str, dict] = {}
             deadline = time.monotonic() + 30
-            while time.monotonic() < deadline and not ("mode" in seen.get("telemetry", {}) and "frame" in seen):  # noqa: E501
+            while time.monotonic() < deadline and not (
+                "mode" in seen.get("telemetry", {}) and "frame" in seen
+            ):
                 try:
                     message = ws.recv(timeout=1)
                 except TimeoutError:
