@@ -31,7 +31,8 @@ each gave no gain on the unseen-scene test split, docs/reproduce/README.md): `au
 (mirror, du → −du), `augment.scale` (label-exact zoom), stronger hue/saturation jitter,
 `pooling="keypoints"` (spatial softmax), `balance_kinds`, `fusion="gated"`; for the grounded
 preset, `ema_decay=0.998` (weight averaging: seed 2 within 0.75 points of its plain run,
-docs/targets.md).
+docs/targets.md), `shift_init_std=0.5` and `distill_from` the shipped checkpoint (three seeds each,
+docs/targets.md, "Not done").
 
 Both presets (`TrainConfig.goal_as_samples`): the goal images are also training states
 with their truth-derived label (none/none), since the collected sectors never hold a
@@ -179,7 +180,9 @@ class TrainConfig:
     shift_init_std: float = SHIFT_INIT_STD
     # Distillation (`controller.training.distill`): a finished planner checkpoint whose scores of every
     # training batch the student also learns, weighted by `distill_weight`; None = off. For the
-    # `described` target choice (the grounded preset).
+    # `described` target choice (the grounded preset). From the shipped checkpoint, three seeds of the
+    # grounded recipe came closer together on the held-out look but below their teacher, two of them
+    # still over 3 points below in distribution (docs/targets.md, "Not done").
     distill_from: str | None = None
     distill_weight: float = 1.0
 
