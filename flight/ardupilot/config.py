@@ -6,16 +6,17 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from drone_inspect_core.state_streams import HEARTBEAT_HZ, LANDED_STATE_HZ
 from flight.ardupilot.state import HOLD_MODES
 from flight.safety import FlightTimeouts
 from flight.urls import validate_connection_url
 
 M = mavlink
 MESSAGE_RATES_HZ: dict[int, float] = {
-    M.MAVLINK_MSG_ID_HEARTBEAT: 4.0,  # mode changes seen within 0.25 s (ArduPilot's default: 1 Hz)
+    M.MAVLINK_MSG_ID_HEARTBEAT: HEARTBEAT_HZ,  # mode changes seen within 0.1 s (ArduPilot's default: 1 Hz)
     M.MAVLINK_MSG_ID_ATTITUDE: 50.0,
     M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 30.0,
-    M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
+    M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: LANDED_STATE_HZ,  # takeoffs and landings, as the MAVSDK backend
     M.MAVLINK_MSG_ID_EKF_STATUS_REPORT: 2.0,
     M.MAVLINK_MSG_ID_SYS_STATUS: 2.0,
     M.MAVLINK_MSG_ID_HOME_POSITION: 1.0,
