@@ -37,7 +37,6 @@ class Teacher:
     model: LatentDynamicsModel
     tokenizer: InstructionTokenizer
     goal: torch.Tensor  # (d,): its stored goal image mean
-    folder: Path
 
     @classmethod
     def load(cls, folder: Path, image_size: int, device: torch.device, channels_last: bool) -> Teacher:
@@ -51,7 +50,7 @@ class Teacher:
             )
         fmt = torch.channels_last if channels_last else torch.preserve_format
         model = ckpt.model.to(device, memory_format=fmt).eval().requires_grad_(False)
-        return cls(model, ckpt.tokenizer, ckpt.goal_image_embedding.to(device), Path(folder))
+        return cls(model, ckpt.tokenizer, ckpt.goal_image_embedding.to(device))
 
     @property
     def has_presence(self) -> bool:
