@@ -7,8 +7,8 @@ default, and MAVSDK's Action plugin asks for EXTENDED_SYS_STATE at 1 Hz when it 
 mission. The sim-vehicle streams both at these rates, PX4 is started with them on the link we give it
 (`sim_world.px4_bridge.px4_process`), the MAVSDK backend asks any vehicle for the landed state at
 `LANDED_STATE_HZ` once connected and once ready (`flight.mavsdk.vehicle`), and the ArduPilot backend
-asks for both at these rates (`flight.ardupilot.config.MESSAGE_RATES_HZ`; ArduPilot's own default is
-1 Hz as well; ArduCopter 4.7 SITL honours them: 9.9 and 10.0 Hz of its clock in a `dronectl fly
+asks for both at these rates (`flight.ardupilot.config.MESSAGE_RATES_HZ`; ArduPilot's own HEARTBEAT
+is 1 Hz; ArduCopter 4.7 SITL honours them: 9.9 and 10.0 Hz of its clock in a `dronectl fly
 --vehicle ardupilot-sitl` mission's .tlog, 3.9 and 5.0 Hz when the backend asked for 4 and 5 Hz): a few
 bytes a second more on a radio.
 """

@@ -129,3 +129,26 @@ def signing_key(args: argparse.Namespace) -> SigningKey | None:
     """The key named by `--signing-key`, loaded now (`SigningKeyError` names the file), or None."""
     path = getattr(args, "signing_key", None)
     return None if path is None else SigningKey.load(path)
+
+
+def add_distillation_options(parser: argparse.ArgumentParser, scope: str = "") -> None:
+    """`--distill-from CHECKPOINT` and `--distill-weight W` (`TrainConfig.distill_from`, `distill_weight`);
+    `scope` starts their help ("grounded: ")."""
+    parser.add_argument(
+        "--distill-from",
+        type=Path,
+        default=None,
+        metavar="CHECKPOINT",
+        help=f"{scope}also learn this planner checkpoint's scores of every training batch (distillation)",
+    )
+    parser.add_argument(
+        "--distill-weight", type=float, default=None, help=f"{scope}weight of the distillation terms"
+    )
+
+
+def distillation_overrides(args: argparse.Namespace) -> dict[str, object]:
+    """The `TrainConfig` fields the distillation options give; empty when neither was given."""
+    given = {"distill_from": args.distill_from, "distill_weight": args.distill_weight}
+    if args.distill_from is not None:
+        given["distill_from"] = str(args.distill_from)
+    return {key: value for key, value in given.items() if value is not None}

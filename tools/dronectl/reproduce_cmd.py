@@ -8,7 +8,7 @@ from pathlib import Path
 
 from controller.training.config import PRESETS
 from drone_inspect_core.parallel import add_ray_option
-from dronectl.options import CommandParser, at_least
+from dronectl.options import CommandParser, add_distillation_options, at_least, distillation_overrides
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -50,16 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="grounded: override the preset's spread of g_X, g_Z at initialisation (a recipe under test)",
     )
-    p.add_argument(
-        "--distill-from",
-        type=Path,
-        default=None,
-        metavar="CHECKPOINT",
-        help="grounded: every seed also learns this planner checkpoint's scores (distillation)",
-    )
-    p.add_argument(
-        "--distill-weight", type=float, default=None, help="grounded: weight of the distillation terms"
-    )
+    add_distillation_options(p, "grounded: ")
     return p
 
 
@@ -73,15 +64,9 @@ def main(argv: list[str]) -> int:
         )
     if args.experiments == "grounded" and not (args.test or args.heldout_look):
         raise SystemExit("dronectl reproduce: --experiments grounded needs --test and/or --heldout-look")
-    recipe = {
-        key: value
-        for key, value in (
-            ("shift_init_std", args.shift_init_std),
-            ("distill_from", None if args.distill_from is None else str(args.distill_from)),
-            ("distill_weight", args.distill_weight),
-        )
-        if value is not None
-    }
+    recipe = distillation_overrides(args)
+    if args.shift_init_std is not None:
+        recipe = {"shift_init_std": args.shift_init_std, **recipe}
     if recipe and args.experiments != "grounded":
         raise SystemExit(
             f"dronectl reproduce: {', '.join('--' + k.replace('_', '-') for k in recipe)}: "

@@ -9,7 +9,13 @@ from pathlib import Path
 
 from controller.planning.latent.config import DISTANCES, FUSIONS, POOLINGS
 from controller.training.config import PRESET_NOTES, PRESETS, AugmentConfig, LossWeights, run_configs
-from dronectl.options import CommandParser, at_least, seed_value
+from dronectl.options import (
+    CommandParser,
+    add_distillation_options,
+    at_least,
+    distillation_overrides,
+    seed_value,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -109,16 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="spread of the global action shifts g_X, g_Z at initialisation (default 0.01)",
     )
-    p.add_argument(
-        "--distill-from",
-        type=Path,
-        default=None,
-        metavar="CHECKPOINT",
-        help="also learn this planner checkpoint's scores of every batch (distillation; grounded preset)",
-    )
-    p.add_argument(
-        "--distill-weight", type=float, default=None, help="weight of the distillation terms (default 1)"
-    )
+    add_distillation_options(p, "grounded preset: ")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -149,8 +146,7 @@ def main(argv: list[str]) -> int:
         balance_kinds=on[args.balance_kinds],
         epsilon_px=args.epsilon_px,
         shift_init_std=args.shift_init_std,
-        distill_from=None if args.distill_from is None else str(args.distill_from),
-        distill_weight=args.distill_weight,
+        **distillation_overrides(args),
     )
     aug_over = _given(
         translate=args.translate,
