@@ -114,3 +114,33 @@ def test_tiny_bench_writes_intervals_and_tunes_on_validation_only(tmp_path: Path
     sizes = AccuracySampleSizes(test=9, test_empty=6, validation=9, validation_empty=6)
     again = run_accuracy_bench(SHIPPED_DIR, tmp_path / "w", sizes, 1, test_dir=tmp_path / "w" / "validation")
     assert again["tuning"] == acc["tuning"]
+
+
+def test_as_streamed_is_the_picture_a_real_mjpeg_server_sends() -> None:
+    """`as_streamed` gives, byte for byte, what the MJPEG server serves at `/frame.jpg`, decoded as the
+    stream camera decodes it; a 1 px red line keeps its luma there but loses most of its chroma."""
+    import urllib.request
+
+    import cv2
+    import numpy as np
+
+    from controller.benchmarks.perception_accuracy import STREAM_JPEG_QUALITY, as_streamed
+    from perception.mjpeg_http import decode_jpeg
+    from sim_world.rendering.mjpeg import MjpegServer
+
+    image = np.full((64, 64, 3), (128, 118, 110), np.uint8)
+    image[:, 31] = (192, 57, 43)  # a 1 px red trim
+    streamed = as_streamed(image)
+    with MjpegServer("127.0.0.1", 0, jpeg_quality=STREAM_JPEG_QUALITY) as server:
+        server.publish(image)
+        with urllib.request.urlopen(f"http://127.0.0.1:{server.port}/frame.jpg", timeout=3.0) as resp:
+            served = cv2.cvtColor(decode_jpeg(resp.read()), cv2.COLOR_BGR2RGB)
+    assert np.array_equal(served, streamed)
+
+    def ycc(rgb: np.ndarray) -> np.ndarray:  # one pixel's (Y, Cr, Cb)
+        return cv2.cvtColor(rgb.reshape(1, 1, 3), cv2.COLOR_RGB2YCrCb).reshape(3).astype(float)
+
+    sent, got = ycc(image[32, 31]), ycc(streamed[32, 31])
+    assert abs(got[0] - sent[0]) < 12  # luma: its own
+    wall = ycc(image[32, 0])
+    assert np.linalg.norm(got[1:] - wall[1:]) < 0.7 * np.linalg.norm(sent[1:] - wall[1:])  # chroma: shared

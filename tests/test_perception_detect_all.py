@@ -213,3 +213,24 @@ def test_a_target_cut_by_the_frame_edge_has_its_colour_read_around_its_whole_box
     # face; 4 before a gauge's saturated bezel outvoted its dial: `attributes._saturated_bezel`) until a
     # round target's box cut by the edge was grown past it (`attributes._beyond_the_edge`): 16 of 16.
     assert right >= len(renders) - 2 and right_if_clipped >= len(renders) - 2, (right, right_if_clipped)
+
+
+def test_switch_box_frames_are_read_through_the_streams_jpeg(detector: ImageDetector) -> None:
+    """Switch boxes of held-out scenes, 2.0-2.9 m and 2.5-3.4 m away, as the simulated MJPEG stream
+    delivers them (4:2:0 JPEG: a 1 px frame keeps its luma, not its chroma). Measured 62 of 68 frames
+    read right, 66 on the lossless renders; the reader that fitted luma and chroma as one (RGB) read 56."""
+    from controller.benchmarks.perception_accuracy import as_streamed
+
+    right = n = 0
+    for seed in range(200, 300):
+        with World(seed=seed) as world:
+            if world.scene.target_kind != "switchbox":
+                continue
+            colour = colour_name(world.scene.sampled.target.bezel_colour)
+            for near in (2.0, 2.5):
+                world.teleport(*world.scene.pose_for_offset(0.0, 0.0, near + 0.1 * (seed % 10), 0.0))
+                found = detector.detect_all(as_streamed(world.render(with_seg=False).rgb))
+                n += 1
+                right += bool(found) and found[0].attribute == colour
+    assert n == 68
+    assert right >= 60, right

@@ -53,6 +53,20 @@ TRUTH_WAIT_S = 0.5
 latest truth there is, as without demands): well inside the 1 s its readers wait for an answer."""
 
 
+def encode_jpeg(image_rgb: np.ndarray, quality: int) -> bytes:
+    """An RGB uint8 (H, W, 3) image as the stream sends it: OpenCV's JPEG at `quality`, its default
+    4:2:0 chroma (one colour for each 2×2 pixels, as most cameras' streams)."""
+    image = np.asarray(image_rgb)
+    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+        raise ValueError(f"a JPEG frame needs an RGB uint8 (H, W, 3) image, got {image.dtype} {image.shape}")
+    ok, buf = cv2.imencode(
+        ".jpg", cv2.cvtColor(image, cv2.COLOR_RGB2BGR), [int(cv2.IMWRITE_JPEG_QUALITY), quality]
+    )
+    if not ok:
+        raise RuntimeError(f"JPEG encoding failed for an image of shape {image.shape}")
+    return buf.tobytes()
+
+
 @dataclass(frozen=True)
 class PublishedFrame:
     """One encoded frame as the server holds it."""
@@ -84,7 +98,7 @@ class MjpegServer:
             raise ValueError(f"jpeg_quality must be in [1, 100], got {jpeg_quality}")
         if truth_history < 1:
             raise ValueError(f"truth_history must be >= 1, got {truth_history}")
-        self._jpeg_params = [int(cv2.IMWRITE_JPEG_QUALITY), int(jpeg_quality)]
+        self._jpeg_quality = int(jpeg_quality)
         self._truth_history = truth_history
         self._cond = threading.Condition()
         self._latest: PublishedFrame | None = None
@@ -137,17 +151,12 @@ class MjpegServer:
         time.monotonic() when the scene shown was current) goes with the frame's stream part. `answers`:
         every demand up to this number (`asked()`, read before the scene shown) is answered by it.
         """
-        image = np.asarray(image_rgb)
-        if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
-            raise ValueError(f"publish needs an RGB uint8 (H, W, 3) image, got {image.dtype} {image.shape}")
-        ok, buf = cv2.imencode(".jpg", cv2.cvtColor(image, cv2.COLOR_RGB2BGR), self._jpeg_params)
-        if not ok:
-            raise RuntimeError(f"JPEG encoding failed for an image of shape {image.shape}")
+        jpeg = encode_jpeg(image_rgb, self._jpeg_quality)
         truth_json = json.dumps(truth) if truth is not None else None  # fail here, not in a handler
         with self._cond:
             number = self._next_number
             self._next_number += 1
-            self._latest = PublishedFrame(number, time.monotonic(), buf.tobytes(), scene_s)
+            self._latest = PublishedFrame(number, time.monotonic(), jpeg, scene_s)
             if truth_json is not None:
                 self._truths[number] = truth_json
                 while len(self._truths) > self._truth_history:

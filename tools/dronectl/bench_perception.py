@@ -128,9 +128,12 @@ def format_accuracy(acc: dict[str, Any]) -> list[str]:
             f"p95 {_quantile(f, 'centre_error_p95_px')}"
         )
     for name, m in (acc.get("multi_target") or {}).items():
-        if name.startswith("at_"):
+        if name.startswith("at_") or name == "through_the_stream":
+            how = name.replace("_", " ")
+            if name == "through_the_stream":
+                how = f"through the stream's JPEG (quality {m['jpeg_quality']}, 4:2:0), at shipped"
             lines.append(
-                f"{acc['multi_target']['targets']} targets per scene, {name.replace('_', ' ')}: "
+                f"{acc['multi_target']['targets']} targets per scene, {how}: "
                 f"recall over every fully-in-view target {_rate(m, 'recall_all_fully_in_view_targets')}, "
                 f"kind acc {_rate(m, 'kind_accuracy')}, colour acc {_rate(m, 'attribute_accuracy')}, "
                 f"{m['unmatched_detections']} unmatched detections on {m['images']} images"
