@@ -74,6 +74,8 @@ Numpy and one OpenCV labelling; about a millisecond per box.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
@@ -114,11 +116,30 @@ _FRAME_PX = 1.0  # the frame around the door, as the box's band expects it
 _EDGE_PX = 1.0  # a box side this close to the image's edge is cut by it
 
 
+@dataclass(frozen=True)
+class ColourRead:
+    """A trim's colour as read: its name (`drone_inspect_core.vocabulary`) and `residual`, the median
+    distance (YCbCr, 8-bit) of the trim candidates to that colour's nearest blends. Lower is a surer
+    read: of two twins that both read the colour asked for, the misread one fits it worse
+    (`controller.planning.grounding.select_target`)."""
+
+    name: str
+    residual: float
+
+
 def read_attribute(
     image: np.ndarray, bbox_px: tuple[float, float, float, float], kind: str | None
 ) -> str | None:
     """The trim colour name (`drone_inspect_core.vocabulary`) of the target in `bbox_px`,
-    or None.
+    or None (`read_colour`'s name)."""
+    read = read_colour(image, bbox_px, kind)
+    return None if read is None else read.name
+
+
+def read_colour(
+    image: np.ndarray, bbox_px: tuple[float, float, float, float], kind: str | None
+) -> ColourRead | None:
+    """The trim colour of the target in `bbox_px` and how well it fits, or None.
 
     `kind` picks the band (a switch box's frame, else a ring); None when the box is
     degenerate or has too few pixels around it to compare with.
@@ -142,11 +163,12 @@ def read_attribute(
         candidates = band
     candidates = _subsample(candidates, _MAX_CANDIDATES)
     residual = _residuals(candidates, np.stack(neighbours), _CHROMA_SHARES.get(kind or "", _TRIM_SHARES))
-    choice = int(np.argmin(np.median(residual, axis=1)))
+    fits = np.median(residual, axis=1)
+    choice = int(np.argmin(fits))
     if kind == "gauge" and not _SATURATED[choice]:
         bezel = _saturated_bezel(residual)
         choice = choice if bezel is None else bezel
-    return _NAMES[choice]
+    return ColourRead(_NAMES[choice], float(fits[choice]))
 
 
 def _residuals(candidates: np.ndarray, neighbours: np.ndarray, chroma_shares: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ for a target it cannot centre on).
 first; a weaker peak whose centre lies inside a stronger detection's box is the
 same object seen as another kind (or a second peak of it) and is dropped. Each
 detection also carries its attribute, the trim colour read from the pixels
-(`perception.attributes.read_attribute`).
+(`perception.attributes.read_colour`: the name and how well it fits).
 
 The network runs on torch or, exported from the loaded weights when the detector is made, on
 ONNX Runtime (`backend`, default "auto": ONNX when onnxruntime is installed); the decoding is the
@@ -41,7 +41,7 @@ from safetensors.torch import load_file, save
 from drone_inspect_core.files import write_atomic, write_json_atomic
 from drone_inspect_core.onnx_runtime import OnnxModule, onnx_for
 from drone_inspect_core.own_kinds import checkpoint_kinds
-from perception.attributes import read_attribute
+from perception.attributes import ColourRead, read_colour
 from perception.detector_model import EDGE_SCALE_PX, STRIDE, CentreNet, DetectorConfig, fuse_for_inference
 from perception.errors import DetectorCheckpointError
 from perception.types import Detection
@@ -232,7 +232,7 @@ class ImageDetector:
             kept.append((det, whole))
         # The colour is read around the whole box: a target cut by the frame's edge keeps its rim where it
         # is (its clipped box would put the rim inside the target, on its face).
-        return [replace(d, attribute=read_attribute(image, whole, d.kind)) for d, whole in kept]
+        return [_with_colour(d, read_colour(image, whole, d.kind)) for d, whole in kept]
 
     def _detection_at(
         self, out: torch.Tensor, kind: int, j: int, i: int, score: float, width: int, height: int
@@ -259,3 +259,9 @@ class ImageDetector:
         return Detection(
             bbox_px=bbox, centre_px=(u, v), confidence=score, kind=self.config.kinds[kind]
         ), whole
+
+
+def _with_colour(detection: Detection, read: ColourRead | None) -> Detection:
+    if read is None:
+        return detection
+    return replace(detection, attribute=read.name, attribute_residual=read.residual)

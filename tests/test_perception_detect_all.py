@@ -51,7 +51,9 @@ def test_detect_all_finds_the_single_target_with_its_kind_and_agrees_with_detect
 def test_attribute_reader_names_the_trim_colour(
     detector: ImageDetector, renders: dict[int, tuple[np.ndarray, str, str]]
 ) -> None:
-    right = sum(detector.detect_all(rgb)[0].attribute == colour for rgb, _, colour in renders.values())
+    found = [detector.detect_all(rgb)[0] for rgb, _, _ in renders.values()]
+    right = sum(d.attribute == colour for d, (_, _, colour) in zip(found, renders.values(), strict=True))
+    assert all(d.attribute_residual is not None and d.attribute_residual >= 0.0 for d in found)
     assert len({c for _, _, c in renders.values()}) >= 4  # the scenes show most trim colours
     assert right >= len(renders) - 2, right  # measured 95 of 100 on held-out scenes
 
@@ -95,6 +97,25 @@ def test_read_attribute_on_synthetic_trim() -> None:
         box[18:46, 22:42] = (240, 238, 230)
         assert read_attribute(box, (20.0, 16.0, 44.0, 48.0), "switchbox") == name
     assert read_attribute(np.zeros((8, 8, 3), np.uint8), (3.0, 3.0, 3.5, 3.5), "gauge") is None
+
+
+def test_a_colour_read_says_how_well_it_fits() -> None:
+    """A ring of the palette's red and a washed-out pinkish-grey ring both read red; the true red fits
+    red more closely (its residual is lower), which is what tells twins read alike apart."""
+    yy, xx = np.mgrid[0:64, 0:64]
+    r = np.hypot(xx + 0.5 - 32, yy + 0.5 - 32)
+
+    def ring(rgb: tuple[int, int, int]) -> attributes.ColourRead | None:
+        image = np.full((64, 64, 3), (120, 120, 118), np.uint8)
+        image[r < 14] = rgb
+        image[r < 11] = (245, 242, 235)
+        return attributes.read_colour(image, (18.0, 18.0, 46.0, 46.0), "valve")
+
+    red, washed = ring(shipped_vocabulary().colours["red"].rgb), ring((170, 100, 90))
+    assert red is not None and washed is not None
+    assert red.name == washed.name == "red"
+    assert red.residual < washed.residual / 2
+    assert attributes.read_colour(np.zeros((8, 8, 3), np.uint8), (3.0, 3.0, 3.5, 3.5), "gauge") is None
 
 
 def test_a_ring_cut_by_the_images_edge_is_read_from_its_whole_box() -> None:

@@ -65,7 +65,8 @@ undo its own last move.
 The named target: the detector reports every target it sees (`detect_all`; a detector
 with only `detect` gives its one detection); the loop keeps the strongest one that the
 instruction names (`CentringConfig.target`, else `parse_instruction(instruction)`;
-`controller.planning.grounding`) and tests ε on it alone. Until the named target has
+`controller.planning.grounding`; named by its colour with several read so, the one that colour fits
+best) and tests ε on it alone. Until the named target has
 been found once in a run, no detection of it is "not found", not "lost": the loop holds
 and re-reads up to `not_found_rereads` frames, never moving, then stops with
 `target_not_found` and a message naming what was asked for and what was seen.
