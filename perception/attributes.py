@@ -85,7 +85,7 @@ _NAMES: tuple[str, ...] = shipped_vocabulary().colour_names
 _PALETTE = np.array([shipped_vocabulary().colours[n].rgb for n in _NAMES], dtype=np.float32)  # (C, 3)
 _SATURATED = (_PALETTE.max(axis=1) - _PALETTE.min(axis=1)) / np.maximum(_PALETTE.max(axis=1), 1.0) > 0.3
 """Palette colours with a hue (red, blue, yellow), against black and grey."""
-_HIT_RESIDUAL = 25.0  # a candidate this close (8-bit RGB) to a colour's blends is that colour's
+_HIT_RESIDUAL = 25.0  # a candidate this close (YCbCr, 8-bit) to a colour's blends is that colour's
 _HIT_SHARE = 0.15  # of the candidates, for a saturated colour to win a gauge's reading (`_saturated_bezel`)
 _SHADES = np.linspace(0.55, 1.1, 6, dtype=np.float32)
 _TRIM_SHARES = np.linspace(0.5, 1.0, 5, dtype=np.float32)
@@ -120,8 +120,8 @@ _EDGE_PX = 1.0  # a box side this close to the image's edge is cut by it
 class ColourRead:
     """A trim's colour as read: its name (`drone_inspect_core.vocabulary`) and `residual`, the median
     distance (YCbCr, 8-bit) of the trim candidates to that colour's nearest blends. Lower is a surer
-    read: of two twins that both read the colour asked for, the misread one fits it worse
-    (`controller.planning.grounding.select_target`)."""
+    read: of two twins that both read the colour asked for, the misread one mostly fits it worse
+    (`controller.planning.grounding.select_target` has the count)."""
 
     name: str
     residual: float
