@@ -103,6 +103,39 @@ def test_no_detection_is_a_miss_and_the_wrong_twin_is_counted(
     assert other.wrong_choice == len(fake.seen) and other.not_found == N - len(fake.seen)
 
 
+class RecordingDetector:
+    """A fake detector that sees nothing and keeps a digest of every picture it is shown."""
+
+    def __init__(self) -> None:
+        self.shown: list[bytes] = []
+
+    def detect(self, image: np.ndarray) -> Detection | None:
+        self.shown.append(hashlib.sha1(image.tobytes()).digest())
+        return None
+
+
+def test_through_the_stream_the_detector_sees_the_streams_pictures(twins: Path) -> None:
+    """`through_stream`: the detector is shown each image as the simulated stream delivers it (4:2:0
+    JPEG), not the lossless render; the result says so. The command refuses it without --with-detector."""
+    from dronectl.evaluate_cmd import main
+
+    from perception.evaluation.streamed import as_streamed
+
+    lossless, streamed = RecordingDetector(), RecordingDetector()
+    plain = evaluate_with_detector(DEFAULT_CHECKPOINT, twins, lossless)
+    through = evaluate_with_detector(DEFAULT_CHECKPOINT, twins, streamed, through_stream=True)
+    rows = [r for r in load_index(twins).split("test") if r.in_view and r.targets]
+    assert lossless.shown == [hashlib.sha1(read_image_rgb(r.image).tobytes()).digest() for r in rows]
+    assert streamed.shown == [
+        hashlib.sha1(as_streamed(read_image_rgb(r.image)).tobytes()).digest() for r in rows
+    ]
+    assert not set(lossless.shown) & set(streamed.shown)
+    assert through.through_stream and not plain.through_stream and through.as_dict()["through_stream"] is True
+    with pytest.raises(SystemExit) as refused:
+        main(["--model", str(DEFAULT_CHECKPOINT), "--data", str(twins), "--through-stream"])
+    assert refused.value.code == 2
+
+
 def _shipped_detector():
     from perception.image_detector import ImageDetector
 

@@ -124,7 +124,7 @@ def test_as_streamed_is_the_picture_a_real_mjpeg_server_sends() -> None:
     import cv2
     import numpy as np
 
-    from controller.benchmarks.perception_accuracy import STREAM_JPEG_QUALITY, as_streamed
+    from perception.evaluation.streamed import STREAM_JPEG_QUALITY, as_streamed
     from perception.mjpeg_http import decode_jpeg
     from sim_world.rendering.mjpeg import MjpegServer
 

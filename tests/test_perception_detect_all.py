@@ -240,7 +240,7 @@ def test_switch_box_frames_are_read_through_the_streams_jpeg(detector: ImageDete
     """Switch boxes of held-out scenes, 2.0-2.9 m and 2.5-3.4 m away, as the simulated MJPEG stream
     delivers them (4:2:0 JPEG: a 1 px frame keeps its luma, not its chroma). Measured 62 of 68 frames
     read right, 66 on the lossless renders; the reader that fitted luma and chroma as one (RGB) read 56."""
-    from controller.benchmarks.perception_accuracy import as_streamed
+    from perception.evaluation.streamed import as_streamed
 
     right = n = 0
     for seed in range(200, 300):

@@ -13,11 +13,10 @@ The threshold is tuned on validation only (`threshold_tuning`); the test figures
 reported at the tuned threshold and at the shipped one, every rate with its 95 % Wilson
 interval and the centre-error quantiles with theirs.
 
-The several-target sample is also scored as a stream camera receives it (`as_streamed`): each
-picture JPEG-encoded as the simulated vehicle's MJPEG stream sends it (4:2:0 at `VideoConfig`'s
-quality) and decoded as the stream camera decodes it. A trim 1–2 px wide keeps its luma there but
-shares its chroma with its neighbours, so the colour accuracy of a lossless render overstates what a
-stream gives (`perception.attributes`).
+The several-target sample is also scored as a stream camera receives it
+(`perception.evaluation.streamed.as_streamed`): each picture JPEG-encoded as the simulated vehicle's
+MJPEG stream sends it and decoded as the stream camera decodes it, where a thin trim keeps its luma
+but not its chroma.
 """
 
 from __future__ import annotations
@@ -28,7 +27,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from drone_inspect_core.dataset import DATASET_JSON, read_image_rgb
@@ -39,6 +37,7 @@ from perception.evaluation.evaluate import (
     run_detector,
     select_rows,
 )
+from perception.evaluation.streamed import STREAM_JPEG_QUALITY, as_streamed
 from perception.evaluation.threshold_tuning import (
     SCORE_FLOOR,
     all_at_threshold,
@@ -47,10 +46,7 @@ from perception.evaluation.threshold_tuning import (
     tuning_scores,
 )
 from perception.image_detector import ImageDetector
-from perception.mjpeg_http import decode_jpeg
 from perception.types import Detection
-from sim_world.rendering.mjpeg import encode_jpeg
-from sim_world.rendering.video import VideoConfig
 
 log = logging.getLogger(__name__)
 
@@ -233,19 +229,6 @@ def run_accuracy_bench(
             "threshold": shipped,
         }
     return result
-
-
-STREAM_JPEG_QUALITY = VideoConfig().jpeg_quality
-"""The simulated vehicle's MJPEG stream's JPEG quality (`sim_world.rendering.video.VideoConfig`)."""
-
-
-def as_streamed(image_rgb: np.ndarray, quality: int = STREAM_JPEG_QUALITY) -> np.ndarray:
-    """An RGB picture as a stream camera holds it after the simulated stream: encoded as the MJPEG
-    server encodes a frame, decoded as `perception.mjpeg_http` decodes one."""
-    bgr = decode_jpeg(encode_jpeg(image_rgb, quality))
-    if bgr is None or bgr.size == 0:
-        raise ValueError(f"a picture of shape {np.shape(image_rgb)} did not come back through JPEG")
-    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
 
 def run_detector_all(

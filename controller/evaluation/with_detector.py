@@ -26,6 +26,10 @@ is out of view. Counted for each named target (called absent: missed) and for ea
 view has (called present: the loop would fly towards something). The result keeps each of these pairs'
 p(in view) as the loop asks it (None where no detection matches: absent whatever the threshold), so the
 same pairs on validation scenes choose the threshold (`presence_calibration`).
+
+`through_stream`: each image first goes through the simulated vehicle's MJPEG stream as a stream camera
+receives it (`perception.evaluation.streamed.as_streamed`: 4:2:0 JPEG), and the detector and the planner
+both see that picture, as in a flight through `sim-mavlink` or an autopilot's SITL.
 """
 
 from __future__ import annotations
@@ -43,6 +47,7 @@ from controller.planning.planners import LatentPlannerAdapter, Observation, Plan
 from controller.training.data import Row, load_index
 from drone_inspect_core.dataset import read_image_rgb
 from perception.detector import Detector, detect_all
+from perception.evaluation.streamed import as_streamed
 from perception.masking import paint_over_twins
 from perception.types import Detection
 
@@ -73,6 +78,8 @@ class WithDetectorResult:
     """Each named target's p(in view) as the loop asks it; None where no detection matches."""
     absent_presence: tuple[float | None, ...] = field(default=(), repr=False)
     """The same for each kind no target in view has (the pairs of `absent_called_present`)."""
+    through_stream: bool = False
+    """The images went through the simulated stream's JPEG first (the module docstring)."""
 
     def as_dict(self) -> dict[str, float | int | None]:
         """The figures (the per-pair p's left out)."""
@@ -119,9 +126,11 @@ def evaluate_with_detector(
     detector: Detector,
     split: str = "test",
     epsilon_px: float | None = None,
+    through_stream: bool = False,
 ) -> WithDetectorResult:
     """Score the checkpoint at `model_dir` on `data_dir`'s `split` as the loop shows it each image (see
-    the module docstring); `epsilon_px` None: the dataset's default ε."""
+    the module docstring); `epsilon_px` None: the dataset's default ε; `through_stream`: each image as
+    the simulated stream delivers it."""
     index = load_index(data_dir)
     eps = epsilon_px if epsilon_px is not None else index.default_epsilon_px()
     planner = LatentPlannerAdapter(model_dir)
@@ -134,6 +143,8 @@ def evaluate_with_detector(
     kinds = sorted({t.kind for r in rows for t in r.targets})
     for row in rows:
         image = read_image_rgb(row.image)  # the folder's path joined already, relative or not
+        if through_stream:
+            image = as_streamed(image)
         height, width = image.shape[:2]
         query = loop_query(row)
         detections = detect_all(detector, image)
@@ -170,6 +181,7 @@ def evaluate_with_detector(
         absent_pairs=len(absent),
         present_presence=tuple(present),
         absent_presence=tuple(absent),
+        through_stream=through_stream,
     )
 
 

@@ -48,6 +48,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="the image detector's checkpoint for --with-detector (default: the shipped one)",
     )
     p.add_argument(
+        "--through-stream",
+        action="store_true",
+        help="with --with-detector: each image first through the simulated vehicle's MJPEG stream (4:2:0 "
+        "JPEG, decoded as the stream camera decodes it), as a flight through sim-mavlink or SITL sees it",
+    )
+    p.add_argument(
         "--split", default="test", choices=("test", "train", "goal"), help="dataset split to score"
     )
     p.add_argument("--seed", type=seed_value, default=0, help="seed of the image/instruction pairing")
@@ -77,7 +83,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str]) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.through_stream and not args.with_detector:
+        parser.error("--through-stream goes with --with-detector: it is what the detector and planner see")
     if args.latency < 0 or args.threads < 1:
         raise ValueError(f"--latency must be >= 0 and --threads >= 1, got {args.latency} and {args.threads}")
     from controller.evaluation.evaluate import evaluate_checkpoint_modes
@@ -111,7 +120,7 @@ def main(argv: list[str]) -> int:
 
         try:
             with_detector = evaluate_with_detector(
-                args.model, args.data, detector, args.split, args.epsilon_px
+                args.model, args.data, detector, args.split, args.epsilon_px, args.through_stream
             )
         except (LatentError, DatasetError, ValueError) as exc:
             say_error("dronectl evaluate", str(exc))
@@ -143,8 +152,9 @@ def _print_with_detector(result: WithDetectorResult) -> None:
         if result.twins_rank1 is not None
         else ""
     )
+    pictures = ", each image through the stream's JPEG" if result.through_stream else ""
     print(
-        f"as the loop shows it (the detector taking the target, its twins painted over): rank-1 "
+        f"as the loop shows it (the detector taking the target, its twins painted over{pictures}): rank-1 "
         f"{100 * result.rank1:.2f}% of {result.n} images; no detection matched in {result.not_found}, "
         f"another target taken in {result.wrong_choice}{twins}"
     )
