@@ -118,13 +118,14 @@ _EDGE_PX = 1.0  # a box side this close to the image's edge is cut by it
 
 @dataclass(frozen=True)
 class ColourRead:
-    """A trim's colour as read: its name (`drone_inspect_core.vocabulary`) and `residual`, the median
-    distance (YCbCr, 8-bit) of the trim candidates to that colour's nearest blends. Lower is a surer
-    read: of two twins that both read the colour asked for, the misread one mostly fits it worse
-    (`controller.planning.grounding.select_target` has the count)."""
+    """A trim's colour as read: its name (`drone_inspect_core.vocabulary`) and `doubt`, lower for a surer
+    read. Here (the rule reader) the median distance (YCbCr, 8-bit) of the trim candidates to that
+    colour's nearest blends; the learned reader's is 1 − p(colour) (`perception.colour_model`). Of two
+    twins that both read the colour asked for, the misread one mostly has the larger doubt
+    (`controller.planning.grounding.select_target` has the counts)."""
 
     name: str
-    residual: float
+    doubt: float
 
 
 def read_attribute(
@@ -144,10 +145,7 @@ def read_colour(
     `kind` picks the band (a switch box's frame, else a ring); None when the box is
     degenerate or has too few pixels around it to compare with.
     """
-    if kind == "switchbox":
-        bbox_px = _door_box(image, bbox_px) or bbox_px
-    else:
-        bbox_px = _beyond_the_edge(bbox_px, image.shape[1], image.shape[0])
+    bbox_px = trim_box(image, bbox_px, kind)
     band, outside, inside = _regions(image, bbox_px, kind)
     if len(band) < 4 or len(outside) < 4:
         return None
@@ -169,6 +167,17 @@ def read_colour(
         bezel = _saturated_bezel(residual)
         choice = choice if bezel is None else bezel
     return ColourRead(_NAMES[choice], float(fits[choice]))
+
+
+def trim_box(
+    image: np.ndarray, bbox_px: tuple[float, float, float, float], kind: str | None
+) -> tuple[float, float, float, float]:
+    """The box a trim is read around: a switch box's snapped to its door (`_door_box`), a round target's
+    cut by the image's edge grown past it to the whole ring (`_beyond_the_edge`). The learned reader
+    (`perception.colour_model`) reads around it too."""
+    if kind == "switchbox":
+        return _door_box(image, bbox_px) or bbox_px
+    return _beyond_the_edge(bbox_px, image.shape[1], image.shape[0])
 
 
 def _residuals(candidates: np.ndarray, neighbours: np.ndarray, chroma_shares: np.ndarray) -> np.ndarray:

@@ -50,3 +50,13 @@ class DetectorCheckpointError(PerceptionError):
     def __init__(self, path: object, message: str) -> None:
         super().__init__(f"detector checkpoint {path}: {message}")
         self.path = path
+
+
+class ColourCheckpointError(DetectorCheckpointError):
+    """A trim-colour reader checkpoint (`perception.colour_model`) is missing, corrupt or does not match
+    its config. A detector reads colours with it, so whatever handles a detector checkpoint's error
+    handles this one."""
+
+    def __init__(self, path: object, message: str) -> None:
+        PerceptionError.__init__(self, f"colour reader checkpoint {path}: {message}")
+        self.path = path

@@ -16,8 +16,9 @@ for a target it cannot centre on).
 (3×3 max-pool non-maximum suppression) at or above `score_threshold`, strongest
 first; a weaker peak whose centre lies inside a stronger detection's box is the
 same object seen as another kind (or a second peak of it) and is dropped. Each
-detection also carries its attribute, the trim colour read from the pixels
-(`perception.attributes.read_colour`: the name and how well it fits).
+detection also carries its attribute, the trim colour read from the pixels, with its doubt: by the
+learned colour reader (`perception.colour_model`; a run folder's own in its `colour/` folder, else the
+shipped one), which leaves kinds it was not trained on to the rule reader (`perception.attributes`).
 
 The network runs on torch or, exported from the loaded weights when the detector is made, on
 ONNX Runtime (`backend`, default "auto": ONNX when onnxruntime is installed); the decoding is the
@@ -26,7 +27,6 @@ same for both, and their head outputs agree within 1e-4 (tests/test_perception_o
 
 from __future__ import annotations
 
-import json
 import logging
 from collections.abc import Sequence
 from dataclasses import replace
@@ -36,12 +36,15 @@ import cv2
 import numpy as np
 import torch
 import torch.nn.functional as F
-from safetensors.torch import load_file, save
+from safetensors.torch import save
 
 from drone_inspect_core.files import write_atomic, write_json_atomic
 from drone_inspect_core.onnx_runtime import OnnxModule, onnx_for
 from drone_inspect_core.own_kinds import checkpoint_kinds
 from perception.attributes import ColourRead, read_colour
+from perception.checkpoint_files import load_weights, read_config
+from perception.colour_model import SHIPPED_DIR as COLOUR_SHIPPED_DIR
+from perception.colour_model import ColourReader
 from perception.detector_model import EDGE_SCALE_PX, STRIDE, CentreNet, DetectorConfig, fuse_for_inference
 from perception.errors import DetectorCheckpointError
 from perception.types import Detection
@@ -52,6 +55,8 @@ CHECKPOINT_FORMAT = "drone-inspect/detector/1"
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
 SHIPPED_DIR = Path(__file__).resolve().parent / "assets" / "detector"
+COLOUR_DIR = "colour"
+"""A run folder's own colour reader, where it has one (`ImageDetector.load`)."""
 
 
 def normalise(images_uint8: torch.Tensor) -> torch.Tensor:
@@ -72,21 +77,11 @@ def save_checkpoint(run_dir: Path, model: CentreNet, extra: dict[str, object] | 
 def load_config(run_dir: Path) -> DetectorConfig:
     """The detector config of a run folder; DetectorCheckpointError naming the file on any problem."""
     path = run_dir / CONFIG_FILE
+    fields = read_config(
+        path, CHECKPOINT_FORMAT, "detector", DetectorCheckpointError, "dronectl train-detector"
+    )
     try:
-        payload = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise DetectorCheckpointError(
-            path, "missing (is this a folder written by `dronectl train-detector`?)"
-        ) from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise DetectorCheckpointError(path, f"unreadable: {exc}") from None
-    if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
-        got = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
-        raise DetectorCheckpointError(path, f"field 'format' must be {CHECKPOINT_FORMAT!r}, got {got!r}")
-    if not isinstance(payload.get("detector"), dict):
-        raise DetectorCheckpointError(path, "field 'detector' is missing or not an object")
-    try:
-        return DetectorConfig.from_json_dict(payload["detector"])
+        return DetectorConfig.from_json_dict(fields)
     except (TypeError, ValueError) as exc:
         raise DetectorCheckpointError(path, f"field 'detector': {exc}") from None
 
@@ -94,22 +89,8 @@ def load_config(run_dir: Path) -> DetectorConfig:
 def load_model(run_dir: str | Path) -> CentreNet:
     """The trained network of a run folder (eval mode, not fused)."""
     root = Path(run_dir)
-    config = load_config(root)
-    path = root / WEIGHTS_FILE
-    if not path.is_file():
-        raise DetectorCheckpointError(path, "missing")
-    try:
-        state = load_file(str(path))
-    except Exception as exc:  # safetensors raises its own SafetensorError, OSError, ...
-        raise DetectorCheckpointError(path, f"corrupt or not a safetensors file: {exc}") from None
-    model = CentreNet(config)
-    try:
-        model.load_state_dict(state, strict=True)
-    except RuntimeError as exc:
-        first = str(exc).strip().splitlines()
-        raise DetectorCheckpointError(path, f"does not match {CONFIG_FILE}: {' '.join(first[:3])}") from None
-    if not all(torch.isfinite(t).all() for t in state.values() if t.is_floating_point()):
-        raise DetectorCheckpointError(path, "holds NaN or infinite weights")
+    model = CentreNet(load_config(root))
+    load_weights(model, root / WEIGHTS_FILE, CONFIG_FILE, DetectorCheckpointError)
     return model.eval()
 
 
@@ -129,8 +110,11 @@ class ImageDetector:
         score_threshold: float | None = None,
         backend: str = "auto",
         threads: int | None = 1,
+        colour_reader: ColourReader | None = None,
     ) -> None:
         self.config = model.config
+        self.colour_reader = colour_reader
+        """Reads `detect_all`'s trim colours (`perception.colour_model`); None: the rule reader alone."""
         self.score_threshold = self.config.score_threshold if score_threshold is None else score_threshold
         if not 0.0 < self.score_threshold < 1.0:
             raise ValueError(f"score_threshold must be in (0, 1), got {self.score_threshold}")
@@ -148,7 +132,11 @@ class ImageDetector:
         backend: str = "auto",
         threads: int | None = 1,
     ) -> ImageDetector:
-        detector = cls(load_model(run_dir), score_threshold, backend, threads)
+        """A run folder's detector, reading colours with the colour reader in its `colour/` folder
+        (`dronectl train-colour`), else the shipped one."""
+        own_colour = Path(run_dir) / COLOUR_DIR
+        colour = ColourReader.load(own_colour if own_colour.is_dir() else COLOUR_SHIPPED_DIR)
+        detector = cls(load_model(run_dir), score_threshold, backend, threads, colour)
         detector.own_kinds = checkpoint_kinds(run_dir)
         return detector
 
@@ -232,7 +220,12 @@ class ImageDetector:
             kept.append((det, whole))
         # The colour is read around the whole box: a target cut by the frame's edge keeps its rim where it
         # is (its clipped box would put the rim inside the target, on its face).
-        return [_with_colour(d, read_colour(image, whole, d.kind)) for d, whole in kept]
+        targets = [(whole, d.kind) for d, whole in kept]
+        if self.colour_reader is None:
+            reads = [read_colour(image, whole, kind) for whole, kind in targets]
+        else:
+            reads = self.colour_reader.read_all(image, targets)
+        return [_with_colour(d, read) for (d, _), read in zip(kept, reads, strict=True)]
 
     def _detection_at(
         self, out: torch.Tensor, kind: int, j: int, i: int, score: float, width: int, height: int
@@ -264,4 +257,4 @@ class ImageDetector:
 def _with_colour(detection: Detection, read: ColourRead | None) -> Detection:
     if read is None:
         return detection
-    return replace(detection, attribute=read.name, attribute_residual=read.residual)
+    return replace(detection, attribute=read.name, attribute_doubt=read.doubt)

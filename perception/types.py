@@ -44,8 +44,8 @@ class Detection:
     `bbox_px` = (u0, v0, u1, v1). `confidence` is in [0, 1]; `kind` is "gauge",
     "valve", "switchbox" or None when the detector does not classify; `attribute` is
     the trim colour's name (`drone_inspect_core.vocabulary`), None when not read;
-    `attribute_residual` how closely that colour explains the trim's pixels
-    (`perception.attributes.ColourRead`: lower is a surer read), None when not read.
+    `attribute_doubt` how unsure that read is (`perception.attributes.ColourRead`: lower is a surer read;
+    comparable between detections of one kind), None when not read.
     """
 
     bbox_px: tuple[float, float, float, float]
@@ -53,4 +53,4 @@ class Detection:
     confidence: float
     kind: str | None = None
     attribute: str | None = None
-    attribute_residual: float | None = None
+    attribute_doubt: float | None = None

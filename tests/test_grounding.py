@@ -104,15 +104,15 @@ def test_twins_read_alike_are_told_apart_by_how_well_the_colour_fits() -> None:
     """Twins differ in their trim, so of two valves both read red one is misread: the loop takes the one
     red fits best, not the stronger detection; an unscored read comes last, equal fits go to the
     stronger, and with no colour asked the strongest is taken as before."""
-    fits_worse = replace(det("valve", "red", 0.9, 60), attribute_residual=30.0)
-    fits_better = replace(det("valve", "red", 0.6, 140), attribute_residual=8.0)
+    fits_worse = replace(det("valve", "red", 0.9, 60), attribute_doubt=30.0)
+    fits_better = replace(det("valve", "red", 0.6, 140), attribute_doubt=8.0)
     unscored = det("valve", "red", 0.95, 100)
     red_valve = TargetQuery("valve", "red")
     assert select_target((fits_worse, fits_better), red_valve) is fits_better
     assert select_target((unscored, fits_worse, fits_better), red_valve) is fits_better
     assert select_target((unscored,), red_valve) is unscored
     assert select_target((fits_worse, fits_better), TargetQuery("valve")) is fits_worse
-    as_good = replace(fits_worse, attribute_residual=8.0)
+    as_good = replace(fits_worse, attribute_doubt=8.0)
     assert select_target((fits_better, as_good), red_valve) is as_good
 
 

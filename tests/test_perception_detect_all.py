@@ -53,7 +53,7 @@ def test_attribute_reader_names_the_trim_colour(
 ) -> None:
     found = [detector.detect_all(rgb)[0] for rgb, _, _ in renders.values()]
     right = sum(d.attribute == colour for d, (_, _, colour) in zip(found, renders.values(), strict=True))
-    assert all(d.attribute_residual is not None and d.attribute_residual >= 0.0 for d in found)
+    assert all(d.attribute_doubt is not None and d.attribute_doubt >= 0.0 for d in found)
     assert len({c for _, _, c in renders.values()}) >= 4  # the scenes show most trim colours
     assert right >= len(renders) - 2, right  # measured 95 of 100 on held-out scenes
 
@@ -101,7 +101,8 @@ def test_read_attribute_on_synthetic_trim() -> None:
 
 def test_a_colour_read_says_how_well_it_fits() -> None:
     """A ring of the palette's red and a washed-out pinkish-grey ring both read red; the true red fits
-    red more closely (its residual is lower), which is what tells twins read alike apart."""
+    red more closely (the rule reader's doubt, its residual, is lower), which is what tells twins read
+    alike apart."""
     yy, xx = np.mgrid[0:64, 0:64]
     r = np.hypot(xx + 0.5 - 32, yy + 0.5 - 32)
 
@@ -114,7 +115,7 @@ def test_a_colour_read_says_how_well_it_fits() -> None:
     red, washed = ring(shipped_vocabulary().colours["red"].rgb), ring((170, 100, 90))
     assert red is not None and washed is not None
     assert red.name == washed.name == "red"
-    assert red.residual < washed.residual / 2
+    assert red.doubt < washed.doubt / 2
     assert attributes.read_colour(np.zeros((8, 8, 3), np.uint8), (3.0, 3.0, 3.5, 3.5), "gauge") is None
 
 
@@ -236,12 +237,17 @@ def test_a_target_cut_by_the_frame_edge_has_its_colour_read_around_its_whole_box
     assert right >= len(renders) - 2 and right_if_clipped >= len(renders) - 2, (right, right_if_clipped)
 
 
-def test_switch_box_frames_are_read_through_the_streams_jpeg(detector: ImageDetector) -> None:
+@pytest.mark.parametrize("reader", ["learned", "rules"])
+def test_switch_box_frames_are_read_through_the_streams_jpeg(detector: ImageDetector, reader: str) -> None:
     """Switch boxes of held-out scenes, 2.0-2.9 m and 2.5-3.4 m away, as the simulated MJPEG stream
     delivers them (4:2:0 JPEG: a 1 px frame keeps its luma, not its chroma). Measured 62 of 68 frames
-    read right, 66 on the lossless renders; the reader that fitted luma and chroma as one (RGB) read 56."""
+    read right by the learned reader (63 on the lossless renders) and by the rule reader (66 lossless);
+    the rule reader that fitted luma and chroma as one (RGB) read 56."""
     from perception.evaluation.streamed import as_streamed
 
+    if reader == "rules":
+        detector = ImageDetector.shipped(backend="torch")
+        detector.colour_reader = None
     right = n = 0
     for seed in range(200, 300):
         with World(seed=seed) as world:
@@ -255,3 +261,34 @@ def test_switch_box_frames_are_read_through_the_streams_jpeg(detector: ImageDete
                 right += bool(found) and found[0].attribute == colour
     assert n == 68
     assert right >= 60, right
+
+
+def test_the_learned_reader_reads_trims_of_a_look_no_training_saw_through_the_stream(
+    detector: ImageDetector,
+) -> None:
+    """One target of each of 60 scenes of the held-out look (`scenes/heldout_look.yaml`: walls, floors
+    and light no training used), 2.0-2.9 m away, through the stream's JPEG. Measured: the learned
+    reader 53 of 60 right, the rule reader 37 (gauges 20 / 13 of 21, valves 18 / 16 of 20, switch boxes
+    15 / 8 of 19)."""
+    from pathlib import Path
+
+    from perception.evaluation.streamed import as_streamed
+    from sim_world.scene.config import load_scene_config
+    from sim_world.world import WorldConfig
+
+    held = WorldConfig(
+        scene=load_scene_config(Path(__file__).resolve().parents[1] / "scenes" / "heldout_look.yaml")
+    )
+    rules = ImageDetector.shipped(backend="torch")
+    rules.colour_reader = None
+    right = {"learned": 0, "rules": 0}
+    for seed in range(400, 460):
+        with World(held, seed=seed) as world:
+            kind, colour = world.scene.target_kind, colour_name(world.scene.sampled.target.bezel_colour)
+            world.teleport(*world.scene.pose_for_offset(0.0, 0.0, 2.0 + 0.1 * (seed % 10), 0.0))
+            picture = as_streamed(world.render(with_seg=False).rgb)
+        for name, reading in (("learned", detector), ("rules", rules)):
+            found = [d for d in reading.detect_all(picture) if d.kind == kind]
+            right[name] += bool(found) and found[0].attribute == colour
+    assert right["learned"] >= 50, right
+    assert right["rules"] <= 45, right  # what the learned reader adds: the test fails with the rule reader

@@ -16,7 +16,9 @@ interval and the centre-error quantiles with theirs.
 The several-target sample is also scored as a stream camera receives it
 (`perception.evaluation.streamed.as_streamed`): each picture JPEG-encoded as the simulated vehicle's
 MJPEG stream sends it and decoded as the stream camera decodes it, where a thin trim keeps its luma
-but not its chroma.
+but not its chroma. Its colours are also read by the rule reader alone (`perception.attributes`, the
+detector's colour reader set aside), lossless and through the stream, beside the learned reader's
+(`perception.colour_model`) that the detector uses.
 """
 
 from __future__ import annotations
@@ -228,6 +230,15 @@ def run_accuracy_bench(
             **multi_target_figures(multi_rows, all_at_threshold(streamed, shipped), match_px),
             "threshold": shipped,
         }
+        rules = ImageDetector.load(model_dir, SCORE_FLOOR)
+        rules.colour_reader = None  # the rule reader alone (`perception.attributes`), for comparison
+        for name, through_stream in (("rule_reader", False), ("rule_reader_through_the_stream", True)):
+            read = run_detector_all(rules, multi_dir, multi_rows, through_stream=through_stream)
+            figures = multi_target_figures(multi_rows, all_at_threshold(read, shipped), match_px)
+            result["multi_target"][name] = {
+                "attribute_accuracy": figures["attribute_accuracy"],
+                "threshold": shipped,
+            }
     return result
 
 

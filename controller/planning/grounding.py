@@ -277,11 +277,12 @@ def presence_query(query: TargetQuery, detection: Detection | None = None) -> Ta
 
 def select_target(detections: Iterable[Detection], query: TargetQuery) -> Detection | None:
     """The strongest detection that `query` matches; None when none does. Where `query` asks for a
-    colour and several detections read it, the one that colour fits best (`attribute_residual`; an
-    unscored read last, then the strongest): twins differ in their trim, so of two read alike one is
-    misread, and the misread one fits the colour worse. On the validation folders' twin pairs read
-    alike (`data/pval`, `data/pval_twins`, lossless and through the stream's JPEG; a throwaway
-    count) the fit took the right one in 15 of 19, the confidence in 9."""
+    colour and several detections read it, the surest read (`attribute_doubt`; an unscored read last,
+    then the strongest): twins differ in their trim, so of two read alike one is misread, and the
+    misread one is mostly the less sure. On the validation folders' twin pairs read alike (`data/pval`,
+    `data/pval_twins`, lossless and through the stream's JPEG; throwaway counts): with the rule reader
+    the fit took the right one in 15 of 19, the confidence in 9; the learned reader (the detector's
+    since 2026-11-28) read 6 pairs alike, and the doubt took the right one in all 6."""
     fitting = [d for d in detections if query.matches(d)]
     if not fitting:
         return None
@@ -291,8 +292,8 @@ def select_target(detections: Iterable[Detection], query: TargetQuery) -> Detect
 
 
 def _colour_fit_then_strength(detection: Detection) -> tuple[float, float]:
-    residual = detection.attribute_residual
-    return (math.inf if residual is None else residual, -detection.confidence)
+    doubt = detection.attribute_doubt
+    return (math.inf if doubt is None else doubt, -detection.confidence)
 
 
 def describe_seen(detections: Sequence[Detection]) -> str:

@@ -128,6 +128,12 @@ def format_accuracy(acc: dict[str, Any]) -> list[str]:
             f"p95 {_quantile(f, 'centre_error_p95_px')}"
         )
     for name, m in (acc.get("multi_target") or {}).items():
+        if name.startswith("rule_reader"):
+            how = "through the stream's JPEG" if name.endswith("stream") else "lossless"
+            lines.append(
+                f"{acc['multi_target']['targets']} targets per scene, {how}, at shipped: colour acc by the "
+                f"rule reader alone {_rate(m, 'attribute_accuracy')}"
+            )
         if name.startswith("at_") or name == "through_the_stream":
             how = name.replace("_", " ")
             if name == "through_the_stream":

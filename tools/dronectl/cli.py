@@ -48,6 +48,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "move": ("dronectl.move_cmd", "connect to a vehicle, take off, fly one discrete move, land"),
     "train-detector": ("dronectl.train_detector_cmd", "train the image-based target detector"),
+    "train-colour": ("dronectl.train_colour_cmd", "train the learned trim-colour reader"),
     "train": ("dronectl.train_cmd", "train the latent dynamics planner"),
     "evaluate": ("dronectl.evaluate_cmd", "evaluate a trained planner checkpoint on a dataset"),
     "calibrate-presence": (
