@@ -51,6 +51,11 @@ CONFIG_FILE = "config.json"
 SHIPPED_DIR = Path(__file__).resolve().parent / "assets" / "colour"
 
 Box = tuple[float, float, float, float]
+_MAX_SOURCE_PX = 512
+"""A crop's source region is at most this many pixels a side (the frame shrunk first where it would be
+larger), so a box as large as a frame, or a nonsense one, costs a bounded amount of memory."""
+_MAX_BOX_FRAMES = 16
+"""A box more than this many frames across is no target in it: not read."""
 
 
 @dataclass(frozen=True)
@@ -95,6 +100,12 @@ def colour_crop(image: np.ndarray, box: Box, crop_px: int, grow: float) -> np.nd
     """(crop_px, crop_px, 4) float32: RGB in [0, 1] of `box` grown by `grow` about its centre, and a
     channel that is 1 where the crop lies in the image, 0 past its edge (zeros there in RGB)."""
     x0, y0, x1, y1 = box
+    side = max(x1 - x0, y1 - y0) * grow
+    if side > _MAX_SOURCE_PX:  # a box filling a large frame: shrink the frame first, the crop bounded
+        scale = _MAX_SOURCE_PX / side
+        size = (max(1, round(image.shape[1] * scale)), max(1, round(image.shape[0] * scale)))
+        image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+        x0, y0, x1, y1 = x0 * scale, y0 * scale, x1 * scale, y1 * scale
     cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
     hw, hh = max(x1 - x0, 1.0) / 2.0 * grow, max(y1 - y0, 1.0) / 2.0 * grow
     height, width = image.shape[:2]
@@ -204,7 +215,8 @@ class ColourReader:
         self, image: np.ndarray, targets: Sequence[tuple[Box, str | None]]
     ) -> list[ColourRead | None]:
         """The trim colour of each (box, kind) in the RGB uint8 `image`, in order; None where a box is
-        degenerate (no pixel of it in the frame) or the rule reader reads nothing."""
+        degenerate (no pixel of it in the frame, or more than `_MAX_BOX_FRAMES` frames across) or the rule
+        reader reads nothing."""
         reads: list[ColourRead | None] = [None] * len(targets)
         learned = []
         for i, (box, kind) in enumerate(targets):
@@ -225,5 +237,7 @@ class ColourReader:
 
 def _in_frame(box: Box, width: int, height: int) -> bool:
     x0, y0, x1, y1 = box
-    finite = all(np.isfinite(v) for v in box)
-    return finite and x1 > x0 and y1 > y0 and x1 > 0 and y1 > 0 and x0 < width and y0 < height
+    if not all(np.isfinite(v) for v in box):
+        return False
+    sane = max(x1 - x0, y1 - y0) <= _MAX_BOX_FRAMES * max(width, height)
+    return sane and x1 > x0 and y1 > y0 and x1 > 0 and y1 > 0 and x0 < width and y0 < height

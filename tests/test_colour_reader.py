@@ -214,3 +214,20 @@ def test_the_shipped_reader_is_a_small_network_of_the_shipped_vocabulary() -> No
     )
     assert sum(p.numel() for p in reader.model.parameters()) < 200_000
     assert colour_model.SHIPPED_DIR.is_dir()
+
+
+def test_a_box_as_large_as_the_frame_or_larger_is_read_with_bounded_memory() -> None:
+    """A 1920×1080 frame with a box filling it: the crop is taken from the frame shrunk first (the same
+    picture as cropping it whole, at the crop's size); a box thousands of frames across is not read."""
+    image = np.zeros((1080, 1920, 3), np.uint8)
+    image[:, :960] = (200, 30, 30)
+    big = colour_crop(image, (0.0, 0.0, 1920.0, 1080.0), 40, 1.4)
+    assert big.shape == (40, 40, 4)
+    assert big[20, 10, 0] > 0.7 and big[20, 30, 0] < 0.05  # left half red, right half black, kept
+    assert big[0, 20, 3] == 0.0 and big[20, 20, 3] == 1.0  # the frame's edge inside the grown crop
+    reader = shipped_reader_with(("gauge",))
+    huge = (-1e7, -1e7, 1e7, 1e7)
+    read, nan = reader.read_all(image, [(huge, "gauge"), ((np.nan, 0.0, 10.0, 10.0), "gauge")])
+    assert read is None and nan is None
+    whole = reader.read_all(image, [((0.0, 0.0, 1920.0, 1080.0), "gauge")])[0]
+    assert whole is not None and whole.name in COLOURS

@@ -282,7 +282,7 @@ def select_target(detections: Iterable[Detection], query: TargetQuery) -> Detect
     misread one is mostly the less sure. On the validation folders' twin pairs read alike (`data/pval`,
     `data/pval_twins`, lossless and through the stream's JPEG; throwaway counts): with the rule reader
     the fit took the right one in 15 of 19, the confidence in 9; the learned reader (the detector's
-    since 2026-11-28) read 6 pairs alike, and the doubt took the right one in all 6."""
+    since 2026-11-28) read 2 pairs alike, and the doubt took the right one in both."""
     fitting = [d for d in detections if query.matches(d)]
     if not fitting:
         return None
