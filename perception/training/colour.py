@@ -34,7 +34,7 @@ from tqdm import tqdm
 from drone_inspect_core.dataset import DatasetError, is_held_out, load_manifest, read_image_rgb, row_targets
 from drone_inspect_core.files import claimed_dir, write_json_atomic
 from perception.attributes import read_colour
-from perception.colour_model import ColourNet, ColourNetConfig, save_checkpoint, target_crop
+from perception.colour_model import ColourNet, ColourNetConfig, ColourReader, save_checkpoint, target_crop
 from perception.evaluation.streamed import STREAM_JPEG_QUALITY, as_streamed
 
 log = logging.getLogger(__name__)
@@ -97,11 +97,7 @@ class ColourSamples:
         return ColourSamples(self.crops[mask], self.kinds[mask], self.colours[mask], self.images[mask])
 
     @staticmethod
-    def concat(parts: Sequence[ColourSamples], size: int) -> ColourSamples:
-        if not parts:
-            return ColourSamples(
-                np.zeros((0, size, size, 4), np.uint8), *(np.zeros(0, np.int64) for _ in range(3))
-            )
+    def concat(parts: Sequence[ColourSamples]) -> ColourSamples:
         return ColourSamples(
             *(np.concatenate([getattr(p, f) for p in parts]) for f in ("crops", "kinds", "colours", "images"))
         )
@@ -160,13 +156,12 @@ def load_samples(config: TrainColourConfig) -> tuple[ColourSamples, list[tuple[n
                     )
                 )
             image_id += 1
-    samples = ColourSamples.concat(parts, net.crop_px)
-    if not len(samples):
+    if not parts:
         raise DatasetError(
             f"no target in view with a trim colour of {list(net.colours)} and a kind of {list(net.kinds)} in "
             f"the training rows of {', '.join(str(d) for d in config.data_dirs)}"
         )
-    return samples, held_out
+    return ColourSamples.concat(parts), held_out
 
 
 def _tensors(samples: ColourSamples) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -232,8 +227,6 @@ def train_on_samples(
 def held_out_reads(model: ColourNet, held_out: Sequence[tuple[np.ndarray, list[Any]]]) -> dict[str, Any]:
     """Right reads on the held-out targets at their truth boxes, by the network and by the rule reader,
     lossless and through the stream (`STREAM_JPEG_QUALITY`), per kind."""
-    from perception.colour_model import ColourReader
-
     reader = ColourReader(model)
     net = model.config
     right: Counter[tuple[str, str, str]] = Counter()
