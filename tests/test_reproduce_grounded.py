@@ -100,7 +100,8 @@ def test_grounded_reproduction_trains_each_seed_once_and_reports(tmp_path: Path)
         train_overrides={"shift_init_std": 0.25},
     )  # fmt: skip
     text = report.read_text()
-    assert "with `--preset grounded` (shift_init_std = 0.25);" in text  # the recipe under test named
+    # the recipe under test named, the model's changes too
+    assert "with `--preset grounded` (base_width = 4, image_size = 32, shift_init_std = 0.25);" in text
     assert "| one (" in text and "| two (" in text and f"| {LOOK} (" in text and text.count("gap:") == 4
     assert "## With its mirror image" in text  # every test set also scored as the planner can run
     data = json.loads((out / "grounded.json").read_text())
@@ -120,10 +121,34 @@ def test_grounded_reproduction_trains_each_seed_once_and_reports(tmp_path: Path)
     assert again == report
     assert (out / "runs" / "grounded_s0" / "eval.json").read_text() == before
     assert json.loads((out / "grounded.json").read_text())["seeds"][1]["tests"]["two"]["n"] == 24
+    # A finished run is not reported as another recipe's: not at another width, not as another seed.
+    (out / "runs" / "grounded_s1" / "eval.json").unlink()
+    with pytest.raises(
+        ValueError, match=r"grounded_s0: a finished run with model base_width = 4, .* asks for 5"
+    ):
+        reproduce_grounded(
+            [one], [one], None, out, seeds=2, epochs=1, model_overrides={**TINY, "base_width": 5}
+        )
+    (out / "runs" / "grounded_s0").rename(tmp_path / "seed0")
+    (out / "runs" / "grounded_s1").rename(out / "runs" / "grounded_s0")
+    with pytest.raises(ValueError, match=r"grounded_s0: a finished run with train seed = 1, .* asks for 0"):
+        reproduce_grounded([one], [one], None, out, seeds=1, epochs=1, model_overrides=TINY)
+    (out / "runs" / "grounded_s0").rename(out / "runs" / "grounded_s1")
+    (tmp_path / "seed0").rename(out / "runs" / "grounded_s0")  # evaluated: checked all the same
+    with pytest.raises(ValueError, match=r"grounded_s0: .* train shift_init_std = 0.25, .* asks for 0.5"):
+        reproduce_grounded(
+            [one], [one], None, out, seeds=1, model_overrides=TINY, train_overrides={"shift_init_std": 0.5}
+        )
 
 
 @pytest.mark.parametrize(
-    "option", [["--shift-init-std", "0.5"], ["--distill-from", "teacher"], ["--distill-weight", "2"]]
+    "option",
+    [
+        ["--shift-init-std", "0.5"],
+        ["--distill-from", "teacher"],
+        ["--distill-weight", "2"],
+        ["--width", "24"],
+    ],
 )
 def test_a_recipe_override_is_refused_outside_the_grounded_experiment(
     tmp_path: Path, option: list[str]

@@ -77,9 +77,11 @@ def run_grounded_job(job: GroundedJob) -> dict[str, Any]:
     from controller.training.train import METRICS_FILE, train
 
     done = job.run_dir / EVAL_FILE
-    if done.is_file():
-        return json.loads(done.read_text())
     metrics_path = job.run_dir / METRICS_FILE
+    if done.is_file():
+        if metrics_path.is_file():
+            check_run_recipe(job, json.loads(metrics_path.read_text()))
+        return json.loads(done.read_text())
     if not metrics_path.is_file():
         cfg = run_configs(
             "grounded",
@@ -93,11 +95,13 @@ def run_grounded_job(job: GroundedJob) -> dict[str, Any]:
             log.warning("%s was not finished: kept as %s, training it again", job.run_dir, kept)
         train(list(job.train_dirs), job.run_dir, cfg.model, cfg.train, progress=False)
     metrics = json.loads(metrics_path.read_text())
+    check_run_recipe(job, metrics)
     summary: dict[str, Any] = {
         "seed": job.seed,
         "train_seconds": metrics["seconds"],
         "epochs": metrics["train"]["epochs"],
         "best_val_accuracy": metrics["best_val_accuracy"],
+        "model_overrides": dict(job.model_overrides),
         "train_overrides": dict(job.train_overrides),
     }
     for key, _, _ in MODES:
@@ -117,6 +121,21 @@ def run_grounded_job(job: GroundedJob) -> dict[str, Any]:
             }
     write_json_atomic(done, summary, indent=None)
     return summary
+
+
+def check_run_recipe(job: GroundedJob, metrics: dict[str, Any]) -> None:
+    """Refuse a finished run (trained here, or a run folder copied in to be evaluated) whose seed, or a
+    setting the job changes, is not what the job asks for: its figures would be reported as another
+    recipe's. `metrics`: the run's `metrics.json`."""
+    wanted = [("train", "seed", job.seed), *(("model", k, v) for k, v in job.model_overrides)]
+    wanted += [("train", k, v) for k, v in job.train_overrides]
+    for part, key, value in wanted:
+        held = metrics.get(part, {}).get(key)
+        if held != value and str(held) != str(value):
+            raise ValueError(
+                f"{job.run_dir}: a finished run with {part} {key} = {held!r}, but this reproduction "
+                f"asks for {value!r} (seed {job.seed}): move it aside or give the recipe it was trained with"
+            )
 
 
 def _has_twins(folder: Path) -> bool:
@@ -240,7 +259,13 @@ def render_report(
     tests: Sequence[tuple[str, Path]],
 ) -> str:
     seeds = ", ".join(str(s) for s in table["seeds"])
-    changed = sorted({f"{k} = {v}" for r in results for k, v in (r.get("train_overrides") or {}).items()})
+    changed = sorted(
+        {
+            f"{k} = {v}"
+            for r in results
+            for k, v in [*(r.get("model_overrides") or {}).items(), *(r.get("train_overrides") or {}).items()]
+        }
+    )
     recipe = "`--preset grounded`" + (f" ({', '.join(changed)})" if changed else "")
     lines = [
         "# The instruction chooses the target: the grounded preset over seeds",

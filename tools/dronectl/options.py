@@ -131,6 +131,13 @@ def signing_key(args: argparse.Namespace) -> SigningKey | None:
     return None if path is None else SigningKey.load(path)
 
 
+def add_width_option(parser: argparse.ArgumentParser, scope: str = "") -> None:
+    """`--width W`: the CNN's base width (`ModelConfig.base_width`) in place of the preset's."""
+    parser.add_argument(
+        "--width", type=at_least(1), default=None, help=f"{scope}override the preset's CNN base width"
+    )
+
+
 def add_distillation_options(parser: argparse.ArgumentParser, scope: str = "") -> None:
     """`--distill-from CHECKPOINT` and `--distill-weight W` (`TrainConfig.distill_from`, `distill_weight`);
     `scope` starts their help ("grounded: ")."""

@@ -8,7 +8,13 @@ from pathlib import Path
 
 from controller.training.config import PRESETS
 from drone_inspect_core.parallel import add_ray_option
-from dronectl.options import CommandParser, add_distillation_options, at_least, distillation_overrides
+from dronectl.options import (
+    CommandParser,
+    add_distillation_options,
+    add_width_option,
+    at_least,
+    distillation_overrides,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -51,6 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="grounded: override the preset's spread of g_X, g_Z at initialisation (a recipe under test)",
     )
     add_distillation_options(p, "grounded: ")
+    add_width_option(p, "grounded: (a recipe under test) ")
     return p
 
 
@@ -67,11 +74,10 @@ def main(argv: list[str]) -> int:
     recipe = distillation_overrides(args)
     if args.shift_init_std is not None:
         recipe = {"shift_init_std": args.shift_init_std, **recipe}
-    if recipe and args.experiments != "grounded":
-        raise SystemExit(
-            f"dronectl reproduce: {', '.join('--' + k.replace('_', '-') for k in recipe)}: "
-            "for --experiments grounded only"
-        )
+    model = {} if args.width is None else {"base_width": args.width}
+    if (recipe or model) and args.experiments != "grounded":
+        options = [*("--" + k.replace("_", "-") for k in recipe), *(["--width"] if model else [])]
+        raise SystemExit(f"dronectl reproduce: {', '.join(options)}: for --experiments grounded only")
     if args.threads < 1:
         raise SystemExit(f"dronectl reproduce: --threads must be >= 1, got {args.threads}")
     from drone_inspect_core.dataset import load_manifest
@@ -94,6 +100,7 @@ def main(argv: list[str]) -> int:
                 epochs=args.epochs,
                 total_threads=args.threads,
                 ray=args.ray,
+                model_overrides=model,
                 train_overrides=recipe,
             )
             print(f"report: {path}")

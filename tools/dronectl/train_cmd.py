@@ -12,6 +12,7 @@ from controller.training.config import PRESET_NOTES, PRESETS, AugmentConfig, Los
 from dronectl.options import (
     CommandParser,
     add_distillation_options,
+    add_width_option,
     at_least,
     distillation_overrides,
     seed_value,
@@ -54,7 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--threads", type=at_least(1), default=None, help="torch threads (default 2)")
     p.add_argument("--image-size", type=int, default=None, help="override the preset's input size")
-    p.add_argument("--width", type=int, default=None, help="override the preset's CNN base width")
+    add_width_option(p)
     p.add_argument(
         "--coord-channels", choices=("on", "off"), default=None, help="override (u, v) input planes"
     )
